@@ -1,0 +1,78 @@
+"""Generic fixed-step Runge-Kutta 4 that knows nothing of tethers.
+
+The contract follows scipy.integrate: a right-hand side ``fun(t, y, args, dydt)``
+that writes dy/dt into ``dydt`` (a compiled numba function, so the integrator can be
+compiled with it). :func:`make_rk4` returns a compiled stepper specialised for that
+right-hand side; each right-hand side gets its own cached compilation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+__all__ = ["make_rk4", "rk4_integrate"]
+
+
+def make_rk4(fun, compiled=True):
+    """Build a classic RK4 stepper for ``fun(t, y, args, dydt)``.
+
+    Parameters
+    ----------
+    fun : function
+        Right-hand side; writes dy/dt at (t, y) into its last argument. A
+        numba-compiled function when ``compiled`` is True, any Python callable
+        otherwise.
+    compiled : bool
+        Return the numba-compiled stepper (default) or the same code as plain Python.
+
+    Returns
+    -------
+    step : function
+        ``step(t, y, h, args, k1, work, out)``: one RK4 step of size ``h`` from
+        (t, y), where ``k1 = fun(t, y)`` was already evaluated by the caller (so a
+        caller that needs f at the step's start pays for it once). ``work`` is
+        scratch of shape (4, len(y)); ``out`` receives y(t + h) and may not alias y.
+    """
+
+    @njit(cache=True)
+    def step(t, y, h, args, k1, work, out):  # pragma: no cover - compiled
+        m = y.shape[0]
+        k2 = work[0]
+        k3 = work[1]
+        k4 = work[2]
+        tmp = work[3]
+        half = 0.5 * h
+        for i in range(m):
+            tmp[i] = y[i] + half * k1[i]
+        fun(t + half, tmp, args, k2)
+        for i in range(m):
+            tmp[i] = y[i] + half * k2[i]
+        fun(t + half, tmp, args, k3)
+        for i in range(m):
+            tmp[i] = y[i] + h * k3[i]
+        fun(t + h, tmp, args, k4)
+        sixth = h / 6.0
+        for i in range(m):
+            out[i] = y[i] + sixth * (k1[i] + 2.0 * (k2[i] + k3[i]) + k4[i])
+
+    return step if compiled else step.py_func
+
+
+def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
+    """Take ``n_steps`` RK4 steps with a stepper from :func:`make_rk4` (pure Python loop).
+
+    Returns the array of states, shape (n_steps + 1, len(y0)). Meant for tests and
+    small studies; the environments use compiled loops.
+    """
+    y = np.array(y0, dtype=float)
+    m = y.shape[0]
+    out = np.empty((n_steps + 1, m))
+    out[0] = y
+    k1 = np.empty(m)
+    work = np.empty((4, m))
+    for i in range(n_steps):
+        t = t0 + i * h
+        fun(t, out[i], args, k1)
+        step(t, out[i], h, args, k1, work, out[i + 1])
+    return out
