@@ -218,11 +218,13 @@ def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
 
 @njit(cache=True)
 def controlled_rhs(nu, y, args, dy):
-    """dy/dnu of the chain with its reels; ``args = (cmd, par, S, R, P, Q, V, tension)``.
+    """dy/dnu of the chain with its reels.
 
-    Writes the tension T^ at (nu, y) into ``args[7]`` as a by-product.
+    ``args = (cmd, dist, par, S, R, P, Q, V, tension)``: commanded reel rates l'_cmd,
+    a disturbance d added to theta'' (paper Eq. 20, f_d = f + d), the parameter row
+    and scratch. Writes the tension T^ at (nu, y) into ``args[8]`` as a by-product.
     """
-    cmd, par, S, R, P, Q, V, tension = args
+    cmd, dist, par, S, R, P, Q, V, tension = args
     n = cmd.shape[0]
     ecc = par[P_ECC]
     for j in range(n):
@@ -232,57 +234,63 @@ def controlled_rhs(nu, y, args, dy):
         dy[j] = y[n + j]
     _accel(nu, y[0:n], y[n:2 * n], y[2 * n:3 * n], y[3 * n:4 * n], dy[3 * n:4 * n], par,
            S, R, P, Q, V, dy[n:2 * n], tension)
+    for j in range(n):
+        dy[n + j] += dist[j]
 
 
 rk4_step = make_rk4(controlled_rhs)
 
 
 @njit(cache=True)
-def advance(nu, y, cmd, par, h, n_sub, tension_min, deriv_end, tension_end):
-    """Advance every state of a batch by ``n_sub`` RK4 steps of size ``h`` [rad], in place.
+def make_scratch(n):
+    """Work arrays for :func:`advance_one` with n tethers."""
+    m = 4 * n
+    return (np.empty((n, n)), np.empty((n, 1)), np.empty((n, n)), np.empty((n, n)),
+            np.empty((9, n)), np.empty(n), np.empty(m), np.empty((4, m)), np.empty(m))
 
-    Parameters
-    ----------
-    nu : (B,) true anomaly, updated.
-    y : (B, 4n) states, updated.
-    cmd : (B, n) commanded reel rates l'_cmd, held over the call.
-    par : (B, 6+n) or (1, 6+n) parameter rows.
-    tension_min : (B, n) out: minimum T^ over the substep boundaries (incl. both ends).
-    deriv_end : (B, 4n) out: dy/dnu at the final state (holds th'' and l'').
-    tension_end : (B, n) out: T^ at the final state.
+
+@njit(cache=True)
+def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end, tension_end):
+    """Advance one state (nu, y) by ``n_sub`` RK4 steps of size ``h`` [rad]; y in place.
+
+    Returns the final true anomaly. ``tension_min`` receives the minimum T^ over the
+    substep boundaries (both ends included), ``deriv_end`` dy/dnu at the final state
+    (it holds theta'' and l''), ``tension_end`` T^ at the final state.
+    """
+    S, R, P, Q, V, tens, k1, work, ybuf = scratch
+    n = cmd.shape[0]
+    args = (cmd, dist, par, S, R, P, Q, V, tens)
+    t = nu
+    for j in range(n):
+        tension_min[j] = math.inf
+    for i in range(n_sub):
+        controlled_rhs(t, y, args, k1)
+        for j in range(n):
+            tension_min[j] = min(tension_min[j], tens[j])
+        rk4_step(t, y, h, args, k1, work, ybuf)
+        y[:] = ybuf
+        t = nu + (i + 1) * h
+    controlled_rhs(t, y, args, deriv_end)
+    for j in range(n):
+        tension_end[j] = tens[j]
+        tension_min[j] = min(tension_min[j], tens[j])
+    return t
+
+
+@njit(cache=True)
+def advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end):
+    """Batched :func:`advance_one`: every row of (nu (B,), y (B, 4n)) in place.
+
+    ``cmd`` and ``dist`` are (B, n); ``par`` is (B, 6+n) or (1, 6+n) (shared);
+    outputs are (B, n), (B, 4n), (B, n).
     """
     batch, m = y.shape
-    n = m // 4
-    S = np.empty((n, n))
-    R = np.empty((n, 1))
-    P = np.empty((n, n))
-    Q = np.empty((n, n))
-    V = np.empty((9, n))
-    tens = np.empty(n)
-    k1 = np.empty(m)
-    work = np.empty((4, m))
-    ybuf = np.empty(m)
+    scratch = make_scratch(m // 4)
     shared = par.shape[0] == 1
     for b in range(batch):
         pb = par[0] if shared else par[b]
-        args = (cmd[b], pb, S, R, P, Q, V, tens)
-        yb = y[b]
-        t0 = nu[b]
-        t = t0
-        for j in range(n):
-            tension_min[b, j] = math.inf
-        for i in range(n_sub):
-            controlled_rhs(t, yb, args, k1)
-            for j in range(n):
-                tension_min[b, j] = min(tension_min[b, j], tens[j])
-            rk4_step(t, yb, h, args, k1, work, ybuf)
-            yb[:] = ybuf
-            t = t0 + (i + 1) * h
-        controlled_rhs(t, yb, args, deriv_end[b])
-        for j in range(n):
-            tension_end[b, j] = tens[j]
-            tension_min[b, j] = min(tension_min[b, j], tens[j])
-        nu[b] = t
+        nu[b] = advance_one(nu[b], y[b], cmd[b], dist[b], pb, h, n_sub, scratch,
+                            tension_min[b], deriv_end[b], tension_end[b])
 
 
 # --------------------------------------------------------------------------- #

@@ -1,0 +1,11 @@
+"""Baselines and RL agents for tether_gym (installed as ``tether_gym_agents``).
+
+The repository keeps this package in ``agents/``; it is installed under the name
+``tether_gym_agents`` so that it cannot clash with other top-level ``agents``
+packages. ``tether_gym`` itself never imports it.
+"""
+
+from .obs import ObservationLayout
+from .smc import SlidingModeController
+
+__all__ = ["SlidingModeController", "ObservationLayout"]

@@ -1,0 +1,105 @@
+"""The paper's sliding-mode controller (Eqs. 12-17, as corrected in NOTES.md).
+
+    s = C (theta - theta_d) + (theta' - theta_d')                                (12)
+    u = l' = -B^-1 [f + C (theta' - theta_d') - theta_d''] - B^-1 K sat(s / eps)  (16-17)
+
+with theta'' = f + B l' + D l'' from ``TetherChain.control_affine`` (the D l'' term is
+left out of the inverted model: with the previous step's l'' in it the loop goes
+unstable, NOTES.md), theta_d'' = -w^2 theta_d, and sat(x) = x for |x| < 1, sign(x)
+otherwise. The controller reads everything from the observation, so it runs under
+stable-baselines3's ``evaluate_policy`` like any trained agent.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tether_gym.params import check_range
+from tether_gym.physics import TetherChain
+
+from .obs import ObservationLayout
+
+__all__ = ["SlidingModeController"]
+
+
+class SlidingModeController:
+    """Sliding-mode reel-rate law of Shi, Zhu & Zhu (2019), Sec. 4.1.
+
+    Parameters
+    ----------
+    model : TetherChain
+        Model the law inverts (its e and masses are the *nominal* ones).
+    layout : ObservationLayout
+        How to read the env's observation and scale the action.
+    c, k, eps : float
+        Sliding-surface slope C = c I [1/rad], switching gain K = k I [rad/rad^2] and
+        boundary-layer width eps [rad/rad], all > 0 (paper: 1, 1, 0.1).
+    use_observed_params : bool
+        When the observation carries e and the masses (domain randomisation), design
+        on them instead of ``model`` (default True).
+    """
+
+    def __init__(self, model: TetherChain, layout: ObservationLayout, c: float = 1.0,
+                 k: float = 1.0, eps: float = 0.1, use_observed_params: bool = True):
+        if not isinstance(model, TetherChain):
+            raise TypeError(f"model must be a TetherChain, got {type(model).__name__}")
+        if model.n_tethers != layout.n_tethers:
+            raise ValueError(f"model has {model.n_tethers} tethers, the env {layout.n_tethers}")
+        self.model = model
+        self.layout = layout
+        self.c = check_range("c", c, 0.0, low_open=True)
+        self.k = check_range("k", k, 0.0, low_open=True)
+        self.eps = check_range("eps", eps, 0.0, low_open=True)
+        self.use_observed_params = bool(use_observed_params)
+
+    @classmethod
+    def for_env(cls, env, c: float = 1.0, k: float = 1.0, eps: float = 0.1,
+                nominal: TetherChain | None = None, **kwargs) -> SlidingModeController:
+        """Build for a TetherLibration env (wrapped or not).
+
+        ``nominal`` replaces the env's own model (its configured e and masses) for
+        model-mismatch studies.
+        """
+        base = env.unwrapped if hasattr(env, "unwrapped") else env
+        layout = ObservationLayout.from_env(base)
+        model = nominal if nominal is not None else base.model
+        return cls(model, layout, c=c, k=k, eps=eps, **kwargs)
+
+    def reel_rate(self, obs: np.ndarray) -> np.ndarray:
+        """u = l' [-] for a batch of observations (B, obs_dim) -> (B, n)."""
+        lay = self.layout
+        st = lay.split(obs)
+        nu = np.arctan2(st.sin_nu, st.cos_nu)
+        ddref = -lay.frequency**2 * st.theta_ref
+        err = st.theta - st.theta_ref[:, None]
+        derr = st.dtheta - st.dtheta_ref[:, None]
+        s = self.c * err + derr
+        sat = np.clip(s / self.eps, -1.0, 1.0)
+        f, B = self._affine(nu, st)
+        rhs = f + self.c * derr - ddref[:, None] + self.k * sat
+        return -np.linalg.solve(B, rhs[..., None])[..., 0]
+
+    def _affine(self, nu, st):
+        if self.use_observed_params and st.eccentricity is not None:
+            f = np.empty_like(st.theta)
+            B = np.empty(st.theta.shape + (st.theta.shape[1],))
+            for b in range(nu.shape[0]):
+                chain = TetherChain(st.masses[b], float(st.eccentricity[b]),
+                                    self.model.gravity, self.model.length_ratio)
+                f[b], B[b], _ = chain.control_affine(nu[b], st.theta[b], st.dtheta[b],
+                                                     st.length[b])
+            return f, B
+        f, B, _ = self.model.control_affine(nu, st.theta, st.dtheta, st.length)
+        return f, B
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """stable-baselines3 policy interface: (action, None) for one or a batch of obs."""
+        obs = np.asarray(observation, dtype=np.float64)
+        single = obs.ndim == 1
+        batch = obs[None] if single else obs
+        action = self.layout.to_action(self.reel_rate(batch))
+        return (action[0] if single else action), None
+
+    def __repr__(self) -> str:
+        return f"SlidingModeController(c={self.c}, k={self.k}, eps={self.eps}, model={self.model!r})"
+

@@ -1,0 +1,6 @@
+"""Evaluate policies on the scenario suite, or reproduce the paper: ``python evaluate.py --help``."""
+import sys
+
+from tether_gym_agents.evaluation import main
+
+sys.exit(main())

@@ -1,0 +1,115 @@
+"""One compiled control step for a batch of environments: physics, task, observation.
+
+Both :class:`~tether_gym.envs.TetherLibrationEnv` (a batch of one) and
+:class:`~tether_gym.envs.TetherLibrationVectorEnv` call :func:`step_batch`, so their
+trajectories are identical for the same inputs.
+
+Observation layout (float32), n = N-1 tethers:
+``[sin nu, cos nu, theta (n), theta' (n), l (n), l' (n), theta_d, theta_d'``
+``(, e, M_1..M_n when e or the masses are randomised)]``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from ..physics import kernels
+from ..tasks.reward import reward_terms
+from ..tasks.termination import failure_code
+
+__all__ = ["step_batch", "write_obs", "N_COMPONENTS"]
+
+N_COMPONENTS = 4
+
+
+@njit(cache=True)
+def write_obs(nu, y, amplitude, frequency, par, with_params, noise, out):
+    """Fill one observation row; ``noise`` (4n,) is added to [theta, theta', l, l']."""
+    m = y.shape[0]
+    n = m // 4
+    out[0] = math.sin(nu)
+    out[1] = math.cos(nu)
+    for i in range(m):
+        out[2 + i] = y[i] + noise[i]
+    phase = frequency * nu
+    out[2 + m] = amplitude * math.sin(phase)
+    out[3 + m] = amplitude * frequency * math.cos(phase)
+    if with_params:
+        out[4 + m] = par[kernels.P_ECC]
+        tail = par[kernels.P_TAIL:]
+        for j in range(n):
+            out[5 + m + j] = tail[j] - (tail[j + 1] if j + 1 < n else 0.0)
+
+
+@njit(cache=True)
+def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
+               weights, length_min, length_max, accel_ref, with_params, noise,
+               obs, reward, components, failure, tension_min, tension_end, deriv_end):
+    """Advance every environment of the batch by one control step, in place.
+
+    Parameters
+    ----------
+    nu, y : (B,), (B, 4n)  true anomaly [rad] and state rows, updated.
+    action : (B, n)  normalised reel-rate commands, clipped to [-1, 1];
+        l'_cmd = action * max_reel_rate.
+    dist : (B, n)  disturbance on theta'' held over the step (paper Eq. 20).
+    par : (B, 6+n) or (1, 6+n)  kernel parameter rows.
+    weights : tuple  RewardWeights.as_tuple().
+    noise : (B, 4n)  observation noise.
+    obs, reward, components, failure, tension_min, tension_end, deriv_end : outputs.
+
+    A row whose state turns non-finite keeps its previous state (so nothing non-finite
+    reaches the observation) and gets failure code 1 and the lowest reward.
+    """
+    batch, m = y.shape
+    n = m // 4
+    scratch = kernels.make_scratch(n)
+    cmd = np.empty(n)
+    act = np.empty(n)
+    accel = np.empty(n)
+    prev = np.empty(m)
+    shared = par.shape[0] == 1
+    lowest = -(weights[2] + weights[3] + weights[4])
+    for b in range(batch):
+        pb = par[0] if shared else par[b]
+        yb = y[b]
+        prev[:] = yb
+        for j in range(n):
+            a = min(max(action[b, j], -1.0), 1.0)
+            act[j] = a
+            cmd[j] = a * max_reel_rate
+        nu_new = kernels.advance_one(nu[b], yb, cmd, dist[b], pb, h, n_sub, scratch,
+                                     tension_min[b], deriv_end[b], tension_end[b])
+        nu[b] = nu_new
+        code = failure_code(yb, tension_min[b], length_min, length_max)
+        failure[b] = code
+        if code == 1:
+            yb[:] = prev
+            for c in range(components.shape[1]):
+                components[b, c] = 0.0
+            components[b, 0] = lowest
+            reward[b] = lowest
+            for j in range(n):
+                if not math.isfinite(tension_end[b, j]):
+                    tension_end[b, j] = 0.0
+                if not math.isfinite(tension_min[b, j]):
+                    tension_min[b, j] = 0.0
+            for i in range(m):
+                if not math.isfinite(deriv_end[b, i]):
+                    deriv_end[b, i] = 0.0
+        else:
+            ecc = pb[kernels.P_ECC]
+            k = 1.0 + ecc * math.cos(nu_new)
+            k3 = k * k * k
+            cor = 2.0 * ecc * math.sin(nu_new) * k3
+            for j in range(n):
+                accel[j] = (k3 * k * deriv_end[b, 3 * n + j] - cor * yb[3 * n + j]) / accel_ref
+            phase = frequency * nu_new
+            ref = amplitude * math.sin(phase)
+            dref = amplitude * frequency * math.cos(phase)
+            reward[b] = reward_terms(yb[0:n], yb[n:2 * n], ref, dref, act, accel,
+                                     tension_min[b], weights, components[b])
+        write_obs(nu_new, yb, amplitude, frequency, pb, with_params, noise[b], obs[b])

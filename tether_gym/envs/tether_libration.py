@@ -1,0 +1,234 @@
+"""The Gymnasium environment ``tether_gym/TetherLibration-v0``."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from ..physics import TetherChain
+from .batch import ChainBatch
+from .config import EnvConfig
+
+__all__ = ["TetherLibrationEnv"]
+
+
+def observation_space(config: EnvConfig) -> spaces.Box:
+    """Box of the observation layout (see the env docstring)."""
+    low = np.full(config.obs_dim, -np.inf, dtype=np.float32)
+    high = np.full(config.obs_dim, np.inf, dtype=np.float32)
+    low[:2], high[:2] = -1.0, 1.0
+    return spaces.Box(low, high, dtype=np.float32)
+
+
+def action_space(config: EnvConfig) -> spaces.Box:
+    return spaces.Box(-1.0, 1.0, (config.n_tethers,), dtype=np.float32)
+
+
+def check_action(action, n: int) -> np.ndarray:
+    """Return the action as a float64 (1, n) array; ValueError on a wrong shape or NaN/inf."""
+    a = np.asarray(action, dtype=np.float64)
+    if a.shape != (n,):
+        raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action={action!r} must be finite (no NaN or inf)")
+    return a.reshape(1, n)
+
+
+class TetherLibrationEnv(gym.Env):
+    r"""Libration tracking of a tethered multi-satellite chain on an elliptic orbit.
+
+    ## Description
+
+    A heavy main satellite follows a Keplerian ellipse; N-1 subsatellites hang below
+    it in a chain of massless tethers whose lengths are reeled in and out (Shi, Zhu &
+    Zhu, Aerospace Science and Technology 91 (2019) 41-48). The orbit's changing
+    gravity gradient and the Coriolis force of reeling drive the librations. The agent
+    commands the reel rates so that every libration angle tracks
+    theta_d = A sin(w nu) (the paper's Sec. 4; A = 0 is the zero state of Sec. 3.1)
+    while every tether stays taut and within its length bounds. The independent
+    variable is the true anomaly nu [rad]; one control step advances nu by
+    ``control_step``. Angles: theta_i [rad] from the local vertical (pointing to
+    Earth) to tether i, positive when the lower body trails the upper one (paper
+    Eq. 1). Lengths are l_i = L_i / L0 [-]; primes are d/dnu.
+
+    The defaults reproduce the paper's Sec. 4.3 case: Table 1 (N = 3, M1/M2 = 0.5,
+    l(0) = (0.5, 0.5), e = 0.2, p = 8520 km), L0 = 20 km, a reel acceleration limit of
+    0.01 m/s^2 per tether, theta(0) = (0.1, 0), theta'(0) = A w = 0.2.
+
+    ## Action Space
+
+    ``Box(-1, 1, (N-1,), float32)``: the normalised reel-rate command of each tether,
+    clipped to [-1, 1] and mapped to l'_cmd,i = action_i * ``max_reel_rate`` [-]. The
+    reels follow it as a first-order lag (``reel_time_constant``) saturated at the
+    physical acceleration limit ``accel_limit`` (physics.reel). A NaN or inf action
+    raises ValueError.
+
+    | Index | Action                        | Min | Max |
+    |-------|-------------------------------|-----|-----|
+    | i     | reel-rate command of tether i | -1  | 1   |
+
+    ## Observation Space
+
+    ``Box(float32)`` of size 4(N-1) + 4 (+ N when e or the masses are randomised):
+
+    | Index              | Observation                           | Unit      |
+    |--------------------|---------------------------------------|-----------|
+    | 0, 1               | sin(nu), cos(nu): orbital phase       | [-]       |
+    | 2 .. n+1           | theta_i                               | [rad]     |
+    | n+2 .. 2n+1        | theta_i' = d theta_i / d nu           | [rad/rad] |
+    | 2n+2 .. 3n+1       | l_i                                   | [-]       |
+    | 3n+2 .. 4n+1       | l_i' (actual reel rates)              | [-]       |
+    | 4n+2, 4n+3         | theta_d, theta_d' (reference)         | [rad]     |
+    | 4n+4 (randomised)  | eccentricity e                        | [-]       |
+    | 4n+5 .. (rand.)    | mass fractions M_i                    | [-]       |
+
+    (n = N-1.) With the frequency w known, (nu, theta, theta', l, l') is the full
+    state, so the observation is Markov. ``obs_noise`` adds Gaussian noise of that
+    standard deviation to the theta, theta', l and l' entries.
+
+    ## Rewards
+
+    With e_i = theta_i - theta_d, e_i' = theta_i' - theta_d' and the weights of
+    ``reward_weights`` (defaults in brackets):
+
+        r = exp(-(mean e_i^2 + 0.1 mean e_i'^2) / sigma^2)          tracking, sigma [0.05 rad]
+            - w_effort mean(a_i^2)                                   reel effort [0.05]
+            - w_accel mean(min(1, (L_ddot_i / a_ref)^2))             harsh reel accel [0.05]
+            - w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2)      closeness to slack [0.2, T_safe 0.5]
+
+    so r lies in [-0.3, 1] by default. a_ref is the acceleration limit (0.01 m/s^2
+    without one). ``info`` holds each term as ``reward_tracking``, ``reward_effort``,
+    ``reward_accel`` and ``reward_slack``.
+
+    ## Starting State
+
+    nu = ``initial_nu`` (0); theta = ``initial_theta`` (0.1, 0, ..., 0) + U(+-
+    ``init_theta_range``); theta' = theta_d'(nu) + U(+-``init_dtheta_range``);
+    l = ``initial_lengths`` + U(+-``init_length_range``); l' from the open-loop
+    periodic law (paper Eq. 10) on the reference (0 at nu = 0). e and each mass are
+    drawn uniformly from ``eccentricity_range`` and (1 +- ``mass_range``) m_i when
+    given. ``reset(options=...)`` may fix any of ``"nu"``, ``"theta"``, ``"dtheta"``,
+    ``"length"``, ``"dlength"`` (per tether), overriding the draw.
+
+    ## Episode End
+
+    *Terminated* (``info["failure"]`` names the reason, None while healthy):
+    ``"slack"`` any T^_i <= 0 at a physics substep boundary of the step;
+    ``"tumble"`` any |theta_i| >= pi/2; ``"length"`` any l_i outside
+    ``length_bounds``; ``"nonfinite"`` a non-finite state (the last finite state is
+    kept in the observation and the reward is its lower bound).
+    *Truncated* only by the time limit: after ``orbits_per_episode`` orbits of true
+    anomaly (the registered ``max_episode_steps`` equals that step count for the
+    default arguments; pass ``max_episode_steps=-1`` to ``gym.make`` when you lengthen
+    episodes, the env truncates itself).
+
+    ## Arguments
+
+    ``gym.make("tether_gym/TetherLibration-v0", **kwargs)``; unknown names raise
+    ValueError with the list of valid ones.
+
+    | Argument             | Default        | Meaning                                         |
+    |----------------------|----------------|-------------------------------------------------|
+    | n_bodies             | 3              | N, bodies including the main satellite (>= 2)   |
+    | masses               | (1, 2)*        | subsatellite masses, any unit (* equal if N!=3) |
+    | initial_lengths      | (1/n, ...)     | l_i(0) [-]                                      |
+    | initial_theta        | (0.1, 0, ...)  | theta_i(0) [rad] before randomisation           |
+    | initial_nu           | 0              | nu at reset [rad]                               |
+    | eccentricity         | 0.2            | e [-], [0, 1)                                   |
+    | semi_latus_rectum    | 8.52e6         | p [m]                                           |
+    | mu                   | 3.986004418e14 | gravitational parameter [m^3/s^2]               |
+    | total_tether_length  | 2e4            | L0 [m] (enters only through the reel limits)    |
+    | gravity              | "gradient"     | "gradient" or "full"                            |
+    | amplitude, frequency | 0.2, 1         | A [rad] and w [-] of theta_d = A sin(w nu)      |
+    | control_step         | 0.025          | true anomaly per env step [rad]                 |
+    | physics_step         | 0.005          | RK4 step [rad]; divides control_step            |
+    | max_reel_rate        | 0.5            | l'_cmd at abs(action) = 1 [-]                   |
+    | accel_limit          | 0.01           | reel acceleration limit [m/s^2]; None: off      |
+    | speed_limit          | None           | reel speed limit [m/s]                          |
+    | reel_time_constant   | 0.005          | reel lag tau [rad] (>= physics_step / 2)        |
+    | length_bounds        | (0.05, 1.5)    | allowed l_i [-]                                 |
+    | orbits_per_episode   | 3              | episode length [orbits]                         |
+    | init_theta_range     | 0              | half-width of the theta_i(0) draw [rad]         |
+    | init_dtheta_range    | 0              | half-width of the theta_i'(0) draw [rad/rad]    |
+    | init_length_range    | 0              | half-width of the l_i(0) draw [-]               |
+    | obs_noise            | 0              | std of observation noise                        |
+    | disturbance          | 0              | bound of d in theta'' += d (Eq. 20) [rad/rad^2] |
+    | eccentricity_range   | None           | (low, high) to draw e per episode               |
+    | mass_range           | None           | relative half-width to draw each mass           |
+    | reward_weights       | None           | dict overriding RewardWeights fields            |
+    | render_mode          | None           | None, "rgb_array" or "human"                    |
+
+    ## Version History
+
+    * v0: initial release.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
+
+    def __init__(self, render_mode: str | None = None, **kwargs):
+        self.config = EnvConfig.from_kwargs(render_mode=render_mode, **kwargs)
+        self.render_mode = self.config.render_mode
+        self.action_space = action_space(self.config)
+        self.observation_space = observation_space(self.config)
+        self._batch = ChainBatch(self.config, 1)
+        self._rngs = [None]
+        self._needs_reset = True
+        self._renderer = None
+
+    @property
+    def n_tethers(self) -> int:
+        return self.config.n_tethers
+
+    @property
+    def max_episode_steps(self) -> int:
+        return self.config.max_episode_steps
+
+    @property
+    def model(self) -> TetherChain:
+        """The nominal physics model (config's e and masses) for model-based controllers."""
+        cfg = self.config
+        return TetherChain(cfg.masses, cfg.eccentricity, cfg.gravity,
+                           cfg.total_tether_length / cfg.semi_latus_rectum)
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self._rngs[0] = self.np_random
+        self._batch.reset_row(0, self.np_random, options)
+        self._needs_reset = False
+        if self.render_mode == "human":
+            self.render()
+        return self._batch.obs[0].copy(), self._batch.info(0)
+
+    def step(self, action):
+        if self._needs_reset:
+            raise RuntimeError("call reset() before step() (the episode has ended or not begun)")
+        batch = self._batch
+        batch.step(check_action(action, self.config.n_tethers), self._rngs)
+        terminated = bool(batch.failure[0] != 0)
+        truncated = bool(batch.truncated()[0]) and not terminated
+        self._needs_reset = terminated or truncated
+        if self.render_mode == "human":
+            self.render()
+        return (batch.obs[0].copy(), float(batch.reward[0]), terminated, truncated,
+                batch.info(0))
+
+    def render(self):
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; pass render_mode="
+                            "'rgb_array' or 'human' to gym.make")
+            return None
+        if self._renderer is None:
+            from .rendering import ChainRenderer
+
+            self._renderer = ChainRenderer(self.config, self.render_mode)
+        return self._renderer.draw(self._batch.info(0), float(self._batch.par[0, 0]))
+
+    def close(self):
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __repr__(self) -> str:
+        return f"TetherLibrationEnv(n_bodies={self.config.n_bodies}, e={self.config.eccentricity})"
+

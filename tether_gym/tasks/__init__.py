@@ -1,0 +1,26 @@
+"""Task layer: reference librations, open-loop reel laws, reward and termination."""
+
+from .reference import (
+    periodic_length_small_amplitude,
+    periodic_reel_rate,
+    reference,
+    tension_positivity_polynomial,
+    zero_state_length,
+    zero_state_reel_rate,
+)
+from .reward import COMPONENTS, RewardWeights, reward_terms
+from .termination import Failure, failure_code
+
+__all__ = [
+    "reference",
+    "zero_state_reel_rate",
+    "zero_state_length",
+    "periodic_reel_rate",
+    "periodic_length_small_amplitude",
+    "tension_positivity_polynomial",
+    "RewardWeights",
+    "reward_terms",
+    "COMPONENTS",
+    "Failure",
+    "failure_code",
+]

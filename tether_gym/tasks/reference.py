@@ -1,0 +1,94 @@
+"""Reference librations and the paper's open-loop reel laws (pure functions).
+
+All tethers track the same reference (paper Eq. 8-9, w the libration frequency per
+radian of true anomaly, A the amplitude [rad]):
+
+    theta_d = A sin(w nu),  theta_d' = A w cos(w nu),  theta_d'' = -A w^2 sin(w nu).
+
+A = 0 is the zero state of Sec. 3.1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "reference",
+    "zero_state_reel_rate",
+    "zero_state_length",
+    "periodic_reel_rate",
+    "periodic_length_small_amplitude",
+    "tension_positivity_polynomial",
+]
+
+
+def reference(nu, amplitude, frequency):
+    """(theta_d, theta_d', theta_d'') [rad, rad/rad, rad/rad^2] at true anomaly nu."""
+    phase = frequency * np.asarray(nu, dtype=float)
+    s = np.sin(phase)
+    return (amplitude * s, amplitude * frequency * np.cos(phase),
+            -amplitude * frequency**2 * s)
+
+
+def zero_state_reel_rate(nu, length, e):
+    """Paper Eq. 7: l_i' = l_i e sin(nu) / (1 + e cos(nu)) keeps theta = theta' = 0."""
+    nu = np.asarray(nu, dtype=float)
+    factor = e * np.sin(nu) / (1.0 + e * np.cos(nu))
+    return np.asarray(length, dtype=float) * (factor[..., None] if np.ndim(length) > nu.ndim
+                                              else factor)
+
+
+def zero_state_length(nu, length0, e, nu0=0.0):
+    """Integral of Eq. 7: l_i = l_i(nu0) (1 + e cos nu0) / (1 + e cos nu)."""
+    nu = np.asarray(nu, dtype=float)
+    ratio = (1.0 + e * np.cos(nu0)) / (1.0 + e * np.cos(nu))
+    return np.asarray(length0, dtype=float) * (ratio[..., None] if np.ndim(length0) > 0 and
+                                               nu.ndim > 0 else ratio)
+
+
+def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
+    """Paper Eq. 10 as corrected in NOTES.md, for an aligned chain on theta = A sin(w nu).
+
+    l_i' = l_i [4 e sin(nu)(1 + theta') + 2 A k w^2 sin(w nu) - 3 sin(2 theta)]
+           / (4 k (1 + theta'))
+
+    ``theta`` and ``dtheta`` are the (common) libration angle and rate at which the
+    law is evaluated: the reference itself for the open-loop law, or the measured
+    state.
+    """
+    nu = np.asarray(nu, dtype=float)
+    k = 1.0 + e * np.cos(nu)
+    num = (4.0 * e * np.sin(nu) * (1.0 + dtheta)
+           + 2.0 * amplitude * k * frequency**2 * np.sin(frequency * nu)
+           - 3.0 * np.sin(2.0 * theta))
+    return np.asarray(length, dtype=float) * num / (4.0 * k * (1.0 + dtheta))
+
+
+def periodic_length_small_amplitude(nu, length0, e, amplitude):
+    """Paper Eq. 11a (NOTES.md form): small-A integral of Eq. 10 for w = 1.
+
+    ln(l/l0) = {(2A+e)[ln(1+A cos nu) - ln(1+A)] + (2e-5A)[ln(1+e cos nu) - ln(1+e)]}
+               / (2 (A - e)),
+    and for A = e: ln(l/l0) = -(3/2)[ln(1+e cos nu) + 1/(1+e cos nu) - ln(1+e) - 1/(1+e)].
+    Valid from nu = 0 (where l = l0).
+    """
+    nu = np.asarray(nu, dtype=float)
+    A = float(amplitude)
+    if np.isclose(A, e, rtol=0.0, atol=1e-12):
+        ke = 1.0 + e * np.cos(nu)
+        log_ratio = -1.5 * (np.log(ke) + 1.0 / ke - np.log(1.0 + e) - 1.0 / (1.0 + e))
+    else:
+        log_ratio = ((2 * A + e) * (np.log1p(A * np.cos(nu)) - np.log1p(A))
+                     + (2 * e - 5 * A) * (np.log1p(e * np.cos(nu)) - np.log1p(e))) / (2 * (A - e))
+    return np.asarray(length0, dtype=float) * np.exp(log_ratio)
+
+
+def tension_positivity_polynomial(e, amplitude):
+    """Sec. 3.2's condition for T^_{N-1} > 0 (the last tether at apogee, NOTES.md).
+
+    6 - 12A + 6A^2 - 2A^3 - 6e + 15Ae - 12A^2 e + 4A^3 e - 3Ae^2 + 6A^2 e^2 - 2A^3 e^2;
+    the paper requires it to be > 0.
+    """
+    A = amplitude
+    return (6 - 12 * A + 6 * A**2 - 2 * A**3 - 6 * e + 15 * A * e - 12 * A**2 * e
+            + 4 * A**3 * e - 3 * A * e**2 + 6 * A**2 * e**2 - 2 * A**3 * e**2)

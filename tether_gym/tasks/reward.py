@@ -1,0 +1,118 @@
+"""Reward of the libration-tracking task (pure function).
+
+Per control step, with e_i = theta_i - theta_d and e_i' = theta_i' - theta_d':
+
+    r = exp(-c / sigma^2) - w_effort * mean(a_i^2) - w_accel * mean(min(1, (acc_i / acc_ref)^2))
+        - w_slack * mean(clip(1 - T^_i,min / T_safe, 0, 1)^2),
+    c = mean(e_i^2) + rate_weight * mean(e_i'^2),
+
+where a in [-1, 1]^(N-1) is the action (normalised reel-rate command), acc_i the
+reel's physical acceleration at the end of the step over L0 n^2 (so
+acc_i / acc_ref = L_ddot_i / a_ref with a_ref the acceleration limit, or 0.01 m/s^2
+without one), and T^_i,min the smallest tension of tether i during the step. Each
+penalty lies in [0, 1], so r lies in [-(w_effort + w_accel + w_slack), 1].
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+from numba import njit
+
+from ..params import check_range
+
+__all__ = ["RewardWeights", "reward_terms", "COMPONENTS"]
+
+COMPONENTS = ("reward_tracking", "reward_effort", "reward_accel", "reward_slack")
+"""Names of the reward components reported in ``info`` (penalties are <= 0)."""
+
+
+@dataclass(frozen=True)
+class RewardWeights:
+    """Weights of the reward terms.
+
+    Parameters
+    ----------
+    sigma : float
+        Tracking scale [rad], > 0: an RMS error of sigma gives exp(-1).
+    rate_weight : float
+        Weight of the rate error e' in the tracking cost [rad^2/(rad/rad)^2], >= 0.
+    effort : float
+        Weight of mean(a^2), >= 0.
+    accel : float
+        Weight of the reel-acceleration penalty, >= 0.
+    slack : float
+        Weight of the closeness-to-slack penalty, >= 0.
+    safe_tension : float
+        T_safe [-], > 0: tensions above it are not penalised.
+    """
+
+    sigma: float = 0.05
+    rate_weight: float = 0.1
+    effort: float = 0.05
+    accel: float = 0.05
+    slack: float = 0.2
+    safe_tension: float = 0.5
+
+    def __post_init__(self) -> None:
+        check_range("sigma", self.sigma, 0.0, low_open=True)
+        check_range("safe_tension", self.safe_tension, 0.0, low_open=True)
+        for name in ("rate_weight", "effort", "accel", "slack"):
+            check_range(name, getattr(self, name), 0.0)
+
+    @classmethod
+    def from_dict(cls, values: dict | None) -> RewardWeights:
+        """Build from a dict, rejecting unknown keys with the list of valid ones."""
+        if values is None:
+            return cls()
+        if isinstance(values, RewardWeights):
+            return values
+        if not isinstance(values, dict):
+            raise TypeError(f"reward_weights must be a dict, got {type(values).__name__}")
+        valid = set(asdict(cls()))
+        unknown = sorted(set(values) - valid)
+        if unknown:
+            raise ValueError(f"unknown reward_weights keys {unknown}; valid keys: {sorted(valid)}")
+        return cls(**values)
+
+    @property
+    def lower_bound(self) -> float:
+        """Smallest possible reward."""
+        return -(self.effort + self.accel + self.slack)
+
+    def as_tuple(self) -> tuple[float, ...]:
+        return (self.sigma, self.rate_weight, self.effort, self.accel, self.slack,
+                self.safe_tension)
+
+
+@njit(cache=True)
+def reward_terms(theta, dtheta, theta_ref, dtheta_ref, action, accel_ratio, tension_min,
+                 weights, out):
+    """Fill ``out[0:4]`` with the components of :data:`COMPONENTS`; return their sum.
+
+    ``weights`` is :meth:`RewardWeights.as_tuple`; ``accel_ratio`` the reels'
+    L_ddot / a_ref.
+    """
+    sigma, rate_weight, w_effort, w_accel, w_slack, safe = weights
+    n = theta.shape[0]
+    err = 0.0
+    rate = 0.0
+    effort = 0.0
+    acc = 0.0
+    slack = 0.0
+    for j in range(n):
+        e = theta[j] - theta_ref
+        de = dtheta[j] - dtheta_ref
+        err += e * e
+        rate += de * de
+        effort += action[j] * action[j]
+        acc += min(1.0, accel_ratio[j] * accel_ratio[j])
+        margin = min(max(1.0 - tension_min[j] / safe, 0.0), 1.0)
+        slack += margin * margin
+    cost = (err + rate_weight * rate) / n
+    out[0] = math.exp(-cost / (sigma * sigma))
+    out[1] = -w_effort * effort / n
+    out[2] = -w_accel * acc / n
+    out[3] = -w_slack * slack / n
+    return out[0] + out[1] + out[2] + out[3]
