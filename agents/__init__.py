@@ -5,7 +5,16 @@ The repository keeps this package in ``agents/``; it is installed under the name
 packages. ``tether_gym`` itself never imports it.
 """
 
-from .obs import ObservationLayout
+from .obs import ObservationLayout, ReelRatePolicy
+from .open_loop import AngleSource, PeriodicReel, RandomPolicy, ZeroStateReel
 from .smc import SlidingModeController
 
-__all__ = ["SlidingModeController", "ObservationLayout"]
+__all__ = [
+    "SlidingModeController",
+    "ZeroStateReel",
+    "PeriodicReel",
+    "AngleSource",
+    "RandomPolicy",
+    "ReelRatePolicy",
+    "ObservationLayout",
+]

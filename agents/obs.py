@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["ObservationLayout", "ObservedState"]
+__all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy"]
 
 
 class ObservedState(NamedTuple):
@@ -49,12 +49,32 @@ class ObservationLayout:
     @classmethod
     def from_env(cls, env) -> ObservationLayout:
         cfg = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
-        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.randomised)
+        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.with_params)
+
+    @property
+    def obs_dim(self) -> int:
+        """Length of one observation: 4(N-1) + 4 (+ N with the parameters)."""
+        n = self.n_tethers
+        return 4 * n + 4 + ((1 + n) if self.with_params else 0)
+
+    def as_batch(self, observation) -> tuple[np.ndarray, bool]:
+        """(obs as a float64 (B, obs_dim) batch, whether a single observation was given).
+
+        Raises ValueError naming the shape when it is neither (obs_dim,) nor (B, obs_dim).
+        """
+        obs = np.asarray(observation, dtype=np.float64)
+        dim = self.obs_dim
+        if obs.ndim == 1 and obs.shape[0] == dim:
+            return obs[None], True
+        if obs.ndim == 2 and obs.shape[1] == dim:
+            return obs, False
+        raise ValueError(f"observation must have shape ({dim},) or (B, {dim}) for this env "
+                         f"(N-1 = {self.n_tethers} tethers), got {obs.shape}")
 
     def split(self, obs: np.ndarray) -> ObservedState:
         n = self.n_tethers
         obs = np.asarray(obs, dtype=np.float64)
-        expected = 4 * n + 4 + ((1 + n) if self.with_params else 0)
+        expected = self.obs_dim
         if obs.ndim != 2 or obs.shape[1] != expected:
             raise ValueError(f"observation batch must have shape (B, {expected}), got {obs.shape}")
         m = 4 * n
@@ -69,3 +89,27 @@ class ObservationLayout:
     def to_action(self, reel_rate: np.ndarray) -> np.ndarray:
         """Commanded l' [-] -> action in [-1, 1] (float32), clipped."""
         return np.clip(np.asarray(reel_rate) / self.max_reel_rate, -1.0, 1.0).astype(np.float32)
+
+
+class ReelRatePolicy:
+    """Base of the model-based baselines: a reel-rate law behind SB3's ``predict``.
+
+    Subclasses set ``self.layout`` and implement :meth:`reel_rate`, mapping a batch of
+    observations (B, obs_dim) to commanded reel rates l' (B, N-1) [-]; :meth:`predict`
+    scales them to the env's action box with :meth:`ObservationLayout.to_action`.
+    """
+
+    layout: ObservationLayout
+
+    def reel_rate(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """stable-baselines3 policy interface: (action, None) for one or a batch of obs.
+
+        The laws are deterministic; ``state``, ``episode_start`` and ``deterministic``
+        are accepted for compatibility and ignored.
+        """
+        batch, single = self.layout.as_batch(observation)
+        action = self.layout.to_action(self.reel_rate(batch))
+        return (action[0] if single else action), None

@@ -17,12 +17,12 @@ import numpy as np
 from tether_gym.params import check_range
 from tether_gym.physics import TetherChain
 
-from .obs import ObservationLayout
+from .obs import ObservationLayout, ReelRatePolicy
 
 __all__ = ["SlidingModeController"]
 
 
-class SlidingModeController:
+class SlidingModeController(ReelRatePolicy):
     """Sliding-mode reel-rate law of Shi, Zhu & Zhu (2019), Sec. 4.1.
 
     Parameters
@@ -92,14 +92,7 @@ class SlidingModeController:
         f, B, _ = self.model.control_affine(nu, st.theta, st.dtheta, st.length)
         return f, B
 
-    def predict(self, observation, state=None, episode_start=None, deterministic=True):
-        """stable-baselines3 policy interface: (action, None) for one or a batch of obs."""
-        obs = np.asarray(observation, dtype=np.float64)
-        single = obs.ndim == 1
-        batch = obs[None] if single else obs
-        action = self.layout.to_action(self.reel_rate(batch))
-        return (action[0] if single else action), None
-
     def __repr__(self) -> str:
-        return f"SlidingModeController(c={self.c}, k={self.k}, eps={self.eps}, model={self.model!r})"
+        return (f"SlidingModeController(c={self.c}, k={self.k}, eps={self.eps}, "
+                f"model={self.model!r})")
 

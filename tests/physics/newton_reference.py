@@ -26,10 +26,7 @@ def newton_accelerations(nu, theta, dtheta, length, dlength, ddlength, masses, e
     nud = k**2
     nudd = -2.0 * e * np.sin(nu) * k**3
     er = np.array([np.cos(nu), np.sin(nu)])
-    ev = np.array([-np.sin(nu), np.cos(nu)])
     R0 = r * er
-    rdot = e * np.sin(nu) * nud / k**2  # d(1/k)/dt = e sin(nu) nu_dot / k^2
-    V0 = rdot * er + r * nud * ev
 
     phi = nu + theta
     L = L0 * length

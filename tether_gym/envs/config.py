@@ -74,6 +74,7 @@ class EnvConfig:
     disturbance: float = 0.0
     eccentricity_range: tuple[float, float] | None = None
     mass_range: float | None = None
+    observe_params: bool | None = None
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
     render_mode: str | None = None
 
@@ -156,6 +157,9 @@ class EnvConfig:
                                                     self.eccentricity_range, 0.0, 0.99))
         if self.mass_range is not None:
             check_range("mass_range", self.mass_range, 0.0, 1.0, high_open=True)
+        if self.observe_params is not None and not isinstance(self.observe_params, bool):
+            raise TypeError(f"observe_params must be True, False or None, got "
+                            f"{self.observe_params!r}")
         set_(self, "reward_weights", RewardWeights.from_dict(
             self.reward_weights if not isinstance(self.reward_weights, RewardWeights)
             else dataclasses.asdict(self.reward_weights)))
@@ -201,9 +205,18 @@ class EnvConfig:
         return self.eccentricity_range is not None or self.mass_range is not None
 
     @property
+    def with_params(self) -> bool:
+        """Whether e and the mass fractions close the observation.
+
+        ``observe_params`` if given, else :attr:`randomised`. False with randomisation
+        trains a policy that must be robust to parameters it cannot see.
+        """
+        return self.randomised if self.observe_params is None else self.observe_params
+
+    @property
     def obs_dim(self) -> int:
         n = self.n_tethers
-        return 2 + 4 * n + 2 + ((1 + n) if self.randomised else 0)
+        return 2 + 4 * n + 2 + ((1 + n) if self.with_params else 0)
 
     @property
     def rate_scale(self) -> float:
@@ -220,7 +233,8 @@ class EnvConfig:
         m = np.asarray(masses, dtype=float)
         frac = m / m.sum()
         tail = np.cumsum(frac[::-1])[::-1]
-        grav = kernels.GRAVITY_FULL if self.gravity == Gravity.FULL.value else kernels.GRAVITY_GRADIENT
+        grav = (kernels.GRAVITY_FULL if self.gravity == Gravity.FULL.value
+                else kernels.GRAVITY_GRADIENT)
         a_bound = math.inf if self.accel_limit is None else self.accel_limit / self.accel_scale
         v_bound = (math.inf if self.speed_limit is None
                    else self.speed_limit / (self.total_tether_length * self.rate_scale))

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -30,7 +32,7 @@ def check_action(action, n: int) -> np.ndarray:
     a = np.asarray(action, dtype=np.float64)
     if a.shape != (n,):
         raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
-    if not np.all(np.isfinite(a)):
+    if not all(map(math.isfinite, a.tolist())):  # faster than np.isfinite for small n
         raise ValueError(f"action={action!r} must be finite (no NaN or inf)")
     return a.reshape(1, n)
 
@@ -70,7 +72,8 @@ class TetherLibrationEnv(gym.Env):
 
     ## Observation Space
 
-    ``Box(float32)`` of size 4(N-1) + 4 (+ N when e or the masses are randomised):
+    ``Box(float32)`` of size 4(N-1) + 4, plus N when e and the masses are observed
+    (``observe_params``; by default exactly when they are randomised):
 
     | Index              | Observation                           | Unit      |
     |--------------------|---------------------------------------|-----------|
@@ -80,8 +83,8 @@ class TetherLibrationEnv(gym.Env):
     | 2n+2 .. 3n+1       | l_i                                   | [-]       |
     | 3n+2 .. 4n+1       | l_i' (actual reel rates)              | [-]       |
     | 4n+2, 4n+3         | theta_d, theta_d' (reference)         | [rad]     |
-    | 4n+4 (randomised)  | eccentricity e                        | [-]       |
-    | 4n+5 .. (rand.)    | mass fractions M_i                    | [-]       |
+    | 4n+4 (observed)    | eccentricity e                        | [-]       |
+    | 4n+5 .. (observed) | mass fractions M_i                    | [-]       |
 
     (n = N-1.) With the frequency w known, (nu, theta, theta', l, l') is the full
     state, so the observation is Markov. ``obs_noise`` adds Gaussian noise of that
@@ -89,17 +92,19 @@ class TetherLibrationEnv(gym.Env):
 
     ## Rewards
 
-    With e_i = theta_i - theta_d, e_i' = theta_i' - theta_d' and the weights of
-    ``reward_weights`` (defaults in brackets):
+    With e_i = theta_i - theta_d, e_i' = theta_i' - theta_d', the action a and the
+    weights of ``reward_weights`` (defaults in brackets):
 
-        r = exp(-(mean e_i^2 + 0.1 mean e_i'^2) / sigma^2)          tracking, sigma [0.05 rad]
-            - w_effort mean(a_i^2)                                   reel effort [0.05]
-            - w_accel mean(min(1, (L_ddot_i / a_ref)^2))             harsh reel accel [0.05]
-            - w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2)      closeness to slack [0.2, T_safe 0.5]
+        r = r_track * (1 - p),    r_track = 1 / (1 + (mean e_i^2 + 0.1 mean e_i'^2) / sigma^2)
+        p = w_effort mean(a_i^2)                              reel effort [0.05]
+          + w_accel mean(min(1, (L_ddot_i / a_ref)^2))        harsh reel accelerations [0.05]
+          + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2) closeness to slack [0.2, T_safe 0.5]
 
-    so r lies in [-0.3, 1] by default. a_ref is the acceleration limit (0.01 m/s^2
-    without one). ``info`` holds each term as ``reward_tracking``, ``reward_effort``,
-    ``reward_accel`` and ``reward_slack``.
+    with sigma = 0.05 rad and a_ref the acceleration limit (0.01 m/s^2 without one).
+    r lies in [0, 1] (the weights sum to at most 1), so ending an episode early never
+    pays. ``info`` holds ``reward_tracking`` = r_track and the penalties
+    ``reward_effort``, ``reward_accel``, ``reward_slack`` (each -r_track times its
+    term, <= 0); they add up to r.
 
     ## Starting State
 
@@ -117,7 +122,7 @@ class TetherLibrationEnv(gym.Env):
     ``"slack"`` any T^_i <= 0 at a physics substep boundary of the step;
     ``"tumble"`` any |theta_i| >= pi/2; ``"length"`` any l_i outside
     ``length_bounds``; ``"nonfinite"`` a non-finite state (the last finite state is
-    kept in the observation and the reward is its lower bound).
+    kept in the observation and the reward is 0).
     *Truncated* only by the time limit: after ``orbits_per_episode`` orbits of true
     anomaly (the registered ``max_episode_steps`` equals that step count for the
     default arguments; pass ``max_episode_steps=-1`` to ``gym.make`` when you lengthen
@@ -156,6 +161,7 @@ class TetherLibrationEnv(gym.Env):
     | disturbance          | 0              | bound of d in theta'' += d (Eq. 20) [rad/rad^2] |
     | eccentricity_range   | None           | (low, high) to draw e per episode               |
     | mass_range           | None           | relative half-width to draw each mass           |
+    | observe_params       | None           | e, M_i in the obs (None: when randomised)       |
     | reward_weights       | None           | dict overriding RewardWeights fields            |
     | render_mode          | None           | None, "rgb_array" or "human"                    |
 
@@ -206,7 +212,7 @@ class TetherLibrationEnv(gym.Env):
         batch = self._batch
         batch.step(check_action(action, self.config.n_tethers), self._rngs)
         terminated = bool(batch.failure[0] != 0)
-        truncated = bool(batch.truncated()[0]) and not terminated
+        truncated = bool(batch.nu[0] >= batch.nu_end[0] - 1e-9) and not terminated
         self._needs_reset = terminated or truncated
         if self.render_mode == "human":
             self.render()

@@ -90,20 +90,21 @@ class TetherChain:
         names = ("theta", "dtheta", "length", "dlength", "ddlength")
         nu = np.asarray(nu, dtype=float)
         arrs = []
-        for name, v in zip(names, vectors):
+        for name, v in zip(names, vectors, strict=False):  # names cover the longest call
             a = np.asarray(v, dtype=float)
             if a.ndim == 0 or a.shape[-1] != n:
                 raise ValueError(f"{name} must have shape (..., {n}), got {a.shape}")
             arrs.append(a)
         lead = np.broadcast_shapes(nu.shape, *(a.shape[:-1] for a in arrs))
-        for name, a in zip(("nu",) + names, [nu] + arrs):
+        for name, a in zip(("nu",) + names, [nu] + arrs, strict=False):
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"{name}={a!r} must be finite (no NaN or inf)")
         if np.any(arrs[2] <= 0.0):
             raise ValueError(f"length={arrs[2]!r} must be > 0")
         size = int(np.prod(lead))
         flat_nu = np.ascontiguousarray(np.broadcast_to(nu, lead).reshape(size))
-        flat = [np.ascontiguousarray(np.broadcast_to(a, lead + (n,)).reshape(size, n)) for a in arrs]
+        flat = [np.ascontiguousarray(np.broadcast_to(a, lead + (n,)).reshape(size, n))
+                for a in arrs]
         return lead, flat_nu, flat
 
     def _accel(self, nu, theta, dtheta, length, dlength, ddlength):

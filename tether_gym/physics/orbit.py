@@ -77,7 +77,8 @@ def time_from_true_anomaly(nu, e, n, nu0=0.0):
         v = np.asarray(v, dtype=float)
         revs = np.round(v / (2.0 * np.pi))
         v0 = v - 2.0 * np.pi * revs
-        ecc_anom = 2.0 * np.arctan2(np.sqrt(1.0 - e) * np.sin(v0 / 2), np.sqrt(1.0 + e) * np.cos(v0 / 2))
+        ecc_anom = 2.0 * np.arctan2(np.sqrt(1.0 - e) * np.sin(v0 / 2),
+                                    np.sqrt(1.0 + e) * np.cos(v0 / 2))
         return ecc_anom - e * np.sin(ecc_anom) + 2.0 * np.pi * revs
 
     return (mean_anomaly(nu) - mean_anomaly(nu0)) / _mean_motion(e, n)
@@ -98,7 +99,8 @@ def true_anomaly_from_time(t, e, n, nu0=0.0):
         ecc_anom = ecc_anom - delta
         if np.all(np.abs(delta) < 1e-15):
             break
-    v0 = 2.0 * np.arctan2(np.sqrt(1.0 + e) * np.sin(ecc_anom / 2), np.sqrt(1.0 - e) * np.cos(ecc_anom / 2))
+    v0 = 2.0 * np.arctan2(np.sqrt(1.0 + e) * np.sin(ecc_anom / 2),
+                          np.sqrt(1.0 - e) * np.cos(ecc_anom / 2))
     return v0 + 2.0 * np.pi * revs
 
 

@@ -50,8 +50,9 @@ class ReelActuator:
         self.L0 = check_range("total_tether_length", total_tether_length, 0.0, low_open=True)
         n = orbit_params.rate_scale
         self.rate_scale = n
-        self.accel_bound = math.inf if reel.accel_limit is None else reel.accel_limit / (self.L0 * n**2)
-        self.speed_bound = math.inf if reel.speed_limit is None else reel.speed_limit / (self.L0 * n)
+        inf = math.inf
+        self.accel_bound = inf if reel.accel_limit is None else reel.accel_limit / (self.L0 * n**2)
+        self.speed_bound = inf if reel.speed_limit is None else reel.speed_limit / (self.L0 * n)
         self.time_constant = reel.time_constant
 
     def ddlength(self, nu, dlength, command):

@@ -1,9 +1,9 @@
 """Task layer: reference librations, open-loop reel laws, reward and termination."""
 
 from .reference import (
+    desired_libration,
     periodic_length_small_amplitude,
     periodic_reel_rate,
-    reference,
     tension_positivity_polynomial,
     zero_state_length,
     zero_state_reel_rate,
@@ -12,7 +12,7 @@ from .reward import COMPONENTS, RewardWeights, reward_terms
 from .termination import Failure, failure_code
 
 __all__ = [
-    "reference",
+    "desired_libration",
     "zero_state_reel_rate",
     "zero_state_length",
     "periodic_reel_rate",

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "reference",
+    "desired_libration",
     "zero_state_reel_rate",
     "zero_state_length",
     "periodic_reel_rate",
@@ -22,7 +22,7 @@ __all__ = [
 ]
 
 
-def reference(nu, amplitude, frequency):
+def desired_libration(nu, amplitude, frequency):
     """(theta_d, theta_d', theta_d'') [rad, rad/rad, rad/rad^2] at true anomaly nu."""
     phase = frequency * np.asarray(nu, dtype=float)
     s = np.sin(phase)
@@ -30,12 +30,17 @@ def reference(nu, amplitude, frequency):
             -amplitude * frequency**2 * s)
 
 
+def _expand(nu, like):
+    """nu with a trailing axis when ``like`` has one more axis (per-tether values)."""
+    nu = np.asarray(nu, dtype=float)
+    return nu[..., None] if np.ndim(like) > nu.ndim else nu
+
+
 def zero_state_reel_rate(nu, length, e):
     """Paper Eq. 7: l_i' = l_i e sin(nu) / (1 + e cos(nu)) keeps theta = theta' = 0."""
-    nu = np.asarray(nu, dtype=float)
-    factor = e * np.sin(nu) / (1.0 + e * np.cos(nu))
-    return np.asarray(length, dtype=float) * (factor[..., None] if np.ndim(length) > nu.ndim
-                                              else factor)
+    length = np.asarray(length, dtype=float)
+    nu = _expand(nu, length)
+    return length * e * np.sin(nu) / (1.0 + e * np.cos(nu))
 
 
 def zero_state_length(nu, length0, e, nu0=0.0):
@@ -54,14 +59,17 @@ def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
 
     ``theta`` and ``dtheta`` are the (common) libration angle and rate at which the
     law is evaluated: the reference itself for the open-loop law, or the measured
-    state.
+    state. ``nu`` of shape (...) pairs with ``length`` of shape (..., n).
     """
-    nu = np.asarray(nu, dtype=float)
+    length = np.asarray(length, dtype=float)
+    nu = _expand(nu, length)
+    theta = _expand(theta, length)
+    dtheta = _expand(dtheta, length)
     k = 1.0 + e * np.cos(nu)
     num = (4.0 * e * np.sin(nu) * (1.0 + dtheta)
            + 2.0 * amplitude * k * frequency**2 * np.sin(frequency * nu)
            - 3.0 * np.sin(2.0 * theta))
-    return np.asarray(length, dtype=float) * num / (4.0 * k * (1.0 + dtheta))
+    return length * num / (4.0 * k * (1.0 + dtheta))
 
 
 def periodic_length_small_amplitude(nu, length0, e, amplitude):
@@ -70,16 +78,23 @@ def periodic_length_small_amplitude(nu, length0, e, amplitude):
     ln(l/l0) = {(2A+e)[ln(1+A cos nu) - ln(1+A)] + (2e-5A)[ln(1+e cos nu) - ln(1+e)]}
                / (2 (A - e)),
     and for A = e: ln(l/l0) = -(3/2)[ln(1+e cos nu) + 1/(1+e cos nu) - ln(1+e) - 1/(1+e)].
-    Valid from nu = 0 (where l = l0).
+    Valid from nu = 0 (where l = l0). Evaluated without cancellation near A = e by
+    writing 2e - 5A = -(2A + e) - 3(A - e):
+    ln(l/l0) = (2A+e)/2 [g(x) - g(y)] - (3/2)[ln(1+e cos nu) - ln(1+e)] with
+    g(z) = ln(1 + (A-e) z)/(A-e) (= z at A = e), x = cos nu/(1+e cos nu), y = 1/(1+e).
     """
     nu = np.asarray(nu, dtype=float)
     A = float(amplitude)
-    if np.isclose(A, e, rtol=0.0, atol=1e-12):
-        ke = 1.0 + e * np.cos(nu)
-        log_ratio = -1.5 * (np.log(ke) + 1.0 / ke - np.log(1.0 + e) - 1.0 / (1.0 + e))
-    else:
-        log_ratio = ((2 * A + e) * (np.log1p(A * np.cos(nu)) - np.log1p(A))
-                     + (2 * e - 5 * A) * (np.log1p(e * np.cos(nu)) - np.log1p(e))) / (2 * (A - e))
+    delta = A - e
+    c = np.cos(nu)
+    x = c / (1.0 + e * c)
+    y = 1.0 / (1.0 + e)
+
+    def g(z):
+        return z if delta == 0.0 else np.log1p(delta * z) / delta
+
+    log_ratio = (0.5 * (2.0 * A + e) * (g(x) - g(y))
+                 - 1.5 * (np.log1p(e * c) - np.log1p(e)))
     return np.asarray(length0, dtype=float) * np.exp(log_ratio)
 
 

@@ -2,20 +2,23 @@
 
 Per control step, with e_i = theta_i - theta_d and e_i' = theta_i' - theta_d':
 
-    r = exp(-c / sigma^2) - w_effort * mean(a_i^2) - w_accel * mean(min(1, (acc_i / acc_ref)^2))
-        - w_slack * mean(clip(1 - T^_i,min / T_safe, 0, 1)^2),
-    c = mean(e_i^2) + rate_weight * mean(e_i'^2),
+    r = r_track * (1 - p),
+    r_track = 1 / (1 + c / sigma^2),   c = mean(e_i^2) + rate_weight * mean(e_i'^2),
+    p = w_effort mean(a_i^2) + w_accel mean(min(1, (acc_i / acc_ref)^2))
+        + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2),
 
 where a in [-1, 1]^(N-1) is the action (normalised reel-rate command), acc_i the
-reel's physical acceleration at the end of the step over L0 n^2 (so
-acc_i / acc_ref = L_ddot_i / a_ref with a_ref the acceleration limit, or 0.01 m/s^2
-without one), and T^_i,min the smallest tension of tether i during the step. Each
-penalty lies in [0, 1], so r lies in [-(w_effort + w_accel + w_slack), 1].
+reel's physical acceleration at the end of the step over the acceleration limit (or
+0.01 m/s^2 without one), and T^_i,min the smallest tension of tether i during the
+step. r_track lies in (0, 1] and decays slowly (like 1/c) so that a policy far from
+the reference still gains by staying alive; the weights sum to at most 1, so
+p lies in [0, 1] and r in [0, 1]: ending an episode early never pays.
+The components reported in ``info`` add up to r: ``reward_tracking`` = r_track and
+the penalties ``reward_effort`` = -r_track w_effort mean(a^2) etc. (each <= 0).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict, dataclass
 
 from numba import njit
@@ -35,7 +38,7 @@ class RewardWeights:
     Parameters
     ----------
     sigma : float
-        Tracking scale [rad], > 0: an RMS error of sigma gives exp(-1).
+        Tracking scale [rad], > 0: an RMS error of sigma halves r_track.
     rate_weight : float
         Weight of the rate error e' in the tracking cost [rad^2/(rad/rad)^2], >= 0.
     effort : float
@@ -59,7 +62,11 @@ class RewardWeights:
         check_range("sigma", self.sigma, 0.0, low_open=True)
         check_range("safe_tension", self.safe_tension, 0.0, low_open=True)
         for name in ("rate_weight", "effort", "accel", "slack"):
-            check_range(name, getattr(self, name), 0.0)
+            check_range(name, getattr(self, name), 0.0, 1.0)
+        total = self.effort + self.accel + self.slack
+        if total > 1.0:
+            raise ValueError(f"effort + accel + slack = {total!r} must be <= 1 so that the "
+                             "reward stays in [0, 1]")
 
     @classmethod
     def from_dict(cls, values: dict | None) -> RewardWeights:
@@ -75,11 +82,6 @@ class RewardWeights:
         if unknown:
             raise ValueError(f"unknown reward_weights keys {unknown}; valid keys: {sorted(valid)}")
         return cls(**values)
-
-    @property
-    def lower_bound(self) -> float:
-        """Smallest possible reward."""
-        return -(self.effort + self.accel + self.slack)
 
     def as_tuple(self) -> tuple[float, ...]:
         return (self.sigma, self.rate_weight, self.effort, self.accel, self.slack,
@@ -111,8 +113,9 @@ def reward_terms(theta, dtheta, theta_ref, dtheta_ref, action, accel_ratio, tens
         margin = min(max(1.0 - tension_min[j] / safe, 0.0), 1.0)
         slack += margin * margin
     cost = (err + rate_weight * rate) / n
-    out[0] = math.exp(-cost / (sigma * sigma))
-    out[1] = -w_effort * effort / n
-    out[2] = -w_accel * acc / n
-    out[3] = -w_slack * slack / n
+    track = 1.0 / (1.0 + cost / (sigma * sigma))
+    out[0] = track
+    out[1] = -track * w_effort * effort / n
+    out[2] = -track * w_accel * acc / n
+    out[3] = -track * w_slack * slack / n
     return out[0] + out[1] + out[2] + out[3]

@@ -1,0 +1,114 @@
+"""The paper reproduction command (tether_gym_agents.paper) and its metric helpers."""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+import numpy as np
+import pytest
+
+from tether_gym_agents import paper
+
+FIGURES = (
+    "fig2_zero_state_angles.png",
+    "fig3_zero_state_lengths.png",
+    "fig4_zero_state_tensions.png",
+    "fig5_periodic_lengths.png",
+    "fig6_length_change_e07.png",
+    "fig7_smc_angles.png",
+    "fig8_smc_lengths.png",
+    "fig9_smc_tensions.png",
+)
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("paper")
+    code = paper.main(["--out", str(out), "--orbits", "0.2", "--quick"])
+    return code, out
+
+
+def test_main_writes_figures_and_table(short_run):
+    code, out = short_run
+    assert code == 0
+    for name in FIGURES:
+        path = out / name
+        assert path.is_file(), name
+        data = path.read_bytes()
+        assert data[:8] == PNG_MAGIC and len(data) > 5000, name
+    table = (out / "paper_vs_tether_gym.md").read_text()
+    header = "| # | Quantity | Paper | tether_gym | tether_gym (h_c = 0.025) | Verdict | Note |"
+    assert header in table
+    rows = [line for line in table.splitlines() if line.startswith("| ") and "---" not in line]
+    assert len(rows) >= 25  # header + every stated number
+    for key in ("0.75", "24 %", "A = e = 0.2", "about 0.9", "by the end of orbit 1"):
+        assert key in table, key
+    result = json.loads((out / "paper_vs_tether_gym.json").read_text())
+    assert result["orbits"] == 0.2 and result["quick"] is True
+    assert set(FIGURES) <= set(result["figures"])
+    assert len(result["table"]) == len(rows) - 1
+    # the shortened runs really are short, and the metrics that need more say so
+    assert result["smc_paper"]["duration_orbits"] <= 0.2 + 1e-3
+    assert result["smc_paper"]["settings"]["control_step"] == 0.001
+    assert result["smc_default"]["settings"]["control_step"] == 0.025
+    verdicts = {r["quantity"]: r["verdict"] for r in result["table"]}
+    assert verdicts["SMC: mean l_1 + l_2 after orbit 1"] == "n/a (run too short)"
+
+
+@pytest.mark.parametrize("argv", [[], ["--out"], ["--out", "x", "--orbits", "0"],
+                                  ["--out", "x", "--orbits", "nan"],
+                                  ["--out", "x", "--orbits", "abc"], ["--out", "x", "--bad"]])
+def test_main_rejects_bad_arguments(argv, capsys):
+    with pytest.raises(SystemExit) as exc:
+        paper.main(argv)
+    assert exc.value.code == 2
+    assert "usage" in capsys.readouterr().err
+
+
+def test_missing_matplotlib_names_the_pip_command(tmp_path, monkeypatch):
+    monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
+    with pytest.raises(ImportError, match=r'pip install "tether_gym\[plot\]"'):
+        paper.reproduce(tmp_path / "out", orbits=0.01, quick=True, log=None)
+    assert not (tmp_path / "out").exists()  # failed before any run or output
+
+
+def test_reproduce_rejects_bad_orbits(tmp_path):
+    with pytest.raises(ValueError, match="orbits=-1"):
+        paper.reproduce(tmp_path, orbits=-1, log=None)
+
+
+# --------------------------------------------------------------------------- #
+# metric helpers
+# --------------------------------------------------------------------------- #
+def test_convergence_orbits():
+    t = np.linspace(0.0, 3.0, 301)
+    err = np.where(t < 0.8, 0.1, 1e-4)
+    err[50] = 1e-4  # a dip before the end of the transient does not count
+    assert paper.convergence_orbits(t, err) == pytest.approx(0.8)
+    assert paper.convergence_orbits(t, np.full_like(t, 1e-4)) == 0.0
+    late = err.copy()
+    late[-1] = 2e-3
+    assert paper.convergence_orbits(t, late) is None
+
+
+def test_swing():
+    ell = np.array([[0.5, 0.5], [0.6, 0.45], [0.55, 0.5]])
+    np.testing.assert_allclose(paper.swing(ell, 0.5), [0.2, 0.1])
+
+
+def test_chattering_separates_smooth_and_switching_commands():
+    h = 0.001 / (2 * math.pi)  # one step of 0.001 rad, in orbits
+    t = np.arange(0.0, 2.0, h)
+    smooth = 0.01 * np.sin(2 * math.pi * 2 * t)[:, None]  # two humps per orbit
+    c = paper.chattering(t, smooth, start=0.0)
+    assert c["tv_per_orbit"] == pytest.approx(0.08, rel=1e-3)  # 4 * 2 * amplitude
+    assert c["extrema_per_orbit"] == pytest.approx(4.0, abs=0.6)
+    assert c["hf_fraction"] < 0.01
+    switching = smooth + 0.001 * (-1.0) ** np.arange(t.size)[:, None]
+    c = paper.chattering(t, switching, start=0.0)
+    assert c["hf_fraction"] > 0.9
+    assert c["extrema_per_orbit"] > 0.9 / h
+    assert paper.chattering(t, smooth, start=1.9) is None  # too short a window

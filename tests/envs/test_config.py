@@ -1,0 +1,131 @@
+"""EnvConfig: validation of the environment's keyword arguments, derived sizes."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import gymnasium as gym
+import pytest
+
+import tether_gym
+from tether_gym.envs import EnvConfig
+
+from .conftest import ENV_ID
+
+NAN = float("nan")
+
+# (kwargs, exception, regex the message must match: it names the value)
+BAD_KWARGS = [
+    ({"eccentricity": 1.0}, ValueError, r"eccentricity=1\.0 is outside the valid range"),
+    ({"eccentricity": -0.1}, ValueError, r"eccentricity=-0\.1"),
+    ({"eccentricity": NAN}, ValueError, r"eccentricity=nan must be finite"),
+    ({"eccentricity": "0.2"}, TypeError, r"eccentricity must be a real number.*'0\.2'"),
+    ({"n_bodies": 1}, ValueError, r"n_bodies=1 must be >= 2"),
+    ({"n_bodies": 2.5}, TypeError, r"n_bodies must be an int.*2\.5"),
+    ({"masses": (1.0, 2.0, 3.0)}, ValueError, r"masses=\(1\.0, 2\.0, 3\.0\) must have 2 entries"),
+    ({"masses": (1.0, 0.0)}, ValueError, r"masses=\(1\.0, 0\.0\) must all be > 0"),
+    ({"masses": (1.0, -2.0)}, ValueError, r"masses=\(1\.0, -2\.0\) must all be > 0"),
+    ({"masses": (1.0, NAN)}, ValueError, r"masses=.*nan.* must be finite"),
+    ({"masses": "12"}, TypeError, r"masses must be a sequence"),
+    ({"initial_lengths": (0.5, NAN)}, ValueError, r"initial_lengths=.*nan.* must be finite"),
+    ({"initial_theta": (1.6, 0.0)}, ValueError, r"initial_theta=\(1\.6, 0\.0\)"),
+    ({"amplitude": NAN}, ValueError, r"amplitude=nan must be finite"),
+    ({"physics_step": 0.01}, ValueError,
+     r"control_step=0\.025 must be a whole multiple of physics_step=0\.01"),
+    ({"physics_step": 0.05}, ValueError, r"physics_step=0\.05 is outside the valid range"),
+    ({"gravity": "foo"}, ValueError, r"gravity='foo' is not one of 'gradient', 'full'"),
+    ({"gravity": 3}, TypeError, r"gravity must be a str, got int 3"),
+    ({"length_bounds": (1.5, 0.05)}, ValueError,
+     r"length_bounds=\(1\.5, 0\.05\) must be \(low, high\) with 0 <= low < high"),
+    ({"length_bounds": (0.05, 0.4)}, ValueError,
+     r"initial_lengths=\(0\.5, 0\.5\) must lie inside length_bounds=\(0\.05, 0\.4\)"),
+    ({"eccentricity_range": (0.3, 0.1)}, ValueError, r"eccentricity_range=\(0\.3, 0\.1\)"),
+    ({"eccentricity_range": (0.1, 1.0)}, ValueError, r"eccentricity_range\[1\]=1\.0"),
+    ({"mass_range": 1.0}, ValueError, r"mass_range=1\.0"),
+    ({"reel_time_constant": 0.001}, ValueError, r"reel_time_constant=0\.001 must be >="),
+    ({"reward_weights": {"sigmaa": 0.1}}, ValueError, r"unknown reward_weights keys \['sigmaa'\]"),
+    # gym.make itself warns first that 'ansi' is not in metadata["render_modes"]
+    pytest.param({"render_mode": "ansi"}, ValueError, r"render_mode='ansi' must be None",
+                 marks=pytest.mark.filterwarnings("ignore:.*not in the possible render_modes")),
+]
+
+
+def _case_id(case):
+    kwargs = case.values[0] if hasattr(case, "values") else case[0]
+    (name, value), = kwargs.items()
+    return f"{name}={value!r}"
+
+
+@pytest.mark.parametrize(("kwargs", "exc", "match"), BAD_KWARGS,
+                         ids=[_case_id(c) for c in BAD_KWARGS])
+def test_bad_kwargs_raise_with_the_value(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        EnvConfig.from_kwargs(**kwargs)
+    # the same through gym.make (what users call)
+    with pytest.raises(exc, match=match):
+        gym.make(ENV_ID, **kwargs)
+
+
+def test_unknown_kwarg_lists_valid_names_and_suggests():
+    with pytest.raises(ValueError, match=r"'eccentricty' \(did you mean 'eccentricity'\?\)") as err:
+        gym.make(ENV_ID, eccentricty=0.3)
+    message = str(err.value)
+    for name in EnvConfig.names():
+        assert name in message
+    # no suggestion when nothing is close, but still the list
+    with pytest.raises(ValueError, match=r"unknown argument\(s\) 'zzz'; valid arguments: n_bodies"):
+        EnvConfig.from_kwargs(zzz=1)
+
+
+def test_every_field_is_a_documented_argument():
+    """Each EnvConfig field appears in the env docstring's Arguments table."""
+    from tether_gym.envs import TetherLibrationEnv
+
+    doc = TetherLibrationEnv.__doc__
+    table = doc[doc.index("## Arguments"):doc.index("## Version History")]
+    for name in EnvConfig.names():
+        assert name in table, name
+
+
+def test_defaults_match_registration_and_paper_case():
+    cfg = EnvConfig()
+    assert cfg.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS == 754
+    assert cfg.max_episode_steps == math.ceil(3 * 2 * math.pi / 0.025)
+    assert gym.spec(ENV_ID).max_episode_steps == cfg.max_episode_steps
+    assert cfg.n_substeps == 5
+    assert cfg.masses == (1.0, 2.0) and cfg.initial_lengths == (0.5, 0.5)
+    assert cfg.initial_theta == (0.1, 0.0)
+
+
+@pytest.mark.parametrize(("n_bodies", "randomised", "dim"),
+                         [(2, False, 8), (3, False, 12), (4, False, 16), (3, True, 15),
+                          (4, True, 20)])
+def test_obs_dim_formula(n_bodies, randomised, dim):
+    extra = {"mass_range": 0.1} if randomised else {}
+    cfg = EnvConfig(n_bodies=n_bodies, **extra)
+    assert cfg.randomised is randomised
+    assert cfg.obs_dim == dim  # 4(N-1) + 4 (+ N when randomised)
+
+
+def test_defaults_for_other_chain_sizes():
+    cfg = EnvConfig(n_bodies=4)
+    assert cfg.masses == (1.0, 1.0, 1.0)
+    assert cfg.initial_lengths == pytest.approx((1 / 3,) * 3, abs=1e-15)
+    assert cfg.initial_theta == (0.1, 0.0, 0.0)
+
+
+def test_config_is_frozen_and_normalised():
+    cfg = EnvConfig(masses=[1, 2], length_bounds=[0.1, 1.0], gravity="FULL")
+    assert cfg.masses == (1.0, 2.0) and isinstance(cfg.masses, tuple)
+    assert cfg.length_bounds == (0.1, 1.0)
+    assert cfg.gravity == "full"
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        cfg.eccentricity = 0.5
+
+
+def test_episode_steps_follow_orbits_per_episode():
+    assert EnvConfig(orbits_per_episode=0.1).max_episode_steps == math.ceil(0.1 * 2 * math.pi
+                                                                             / 0.025) == 26
+    assert EnvConfig(orbits_per_episode=1.0, control_step=0.05,
+                     physics_step=0.01).max_episode_steps == math.ceil(2 * math.pi / 0.05)
