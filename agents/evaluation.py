@@ -42,6 +42,7 @@ TABLE_COLUMNS = (
     ("reel_excursion", "reel excursion [-]"),
     ("chattering", "chattering [-]"),
 )
+FAILURES = ("slack", "tumble", "length")
 
 
 def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):
@@ -156,11 +157,13 @@ def _fmt(mean: float, half: float, n: int) -> str:
 
 def markdown_table(results: dict) -> str:
     """Overall table (policy x metric, mean +- 95 % CI) and a per-scenario breakdown."""
-    lines = ["| policy | " + " | ".join(title for _, title in TABLE_COLUMNS) + " |",
-             "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
+    lines = ["| policy | " + " | ".join(title for _, title in TABLE_COLUMNS)
+             + " | failures slack/tumble/length |",
+             "|---" * (len(TABLE_COLUMNS) + 2) + "|"]
     for name, agg in results["policies"].items():
         cells = [_fmt(agg[k], agg[f"{k}_ci95"], agg[f"{k}_n"]) for k, _ in TABLE_COLUMNS]
-        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+        counts = "/".join(str(round(agg[f] * agg[f"{f}_n"])) for f in FAILURES)
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {counts} |")
     names = list(results["policies"])
     lines += ["", "Per scenario: success rate / tracking RMS after orbit 1 [rad]", "",
               "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]

@@ -25,7 +25,8 @@ import gymnasium as gym
 
 import tether_gym
 
-__all__ = ["main", "load_hyperparams", "parse_env_kwargs", "ConfigError", "CONFIG_DIR"]
+__all__ = ["main", "load_hyperparams", "parse_env_kwargs", "plot_learning_curve", "ConfigError",
+           "CONFIG_DIR"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
@@ -102,6 +103,37 @@ def parse_env_kwargs(items: list[str]) -> dict:
     return out
 
 
+def plot_learning_curve(run_dir: Path) -> Path | None:
+    """Write ``learning_curve.png`` from ``eval/evaluations.npz``; None without matplotlib.
+
+    Mean evaluation return (with min-max band) and mean episode length against env
+    steps, as recorded by the evaluation callback.
+    """
+    import numpy as np
+
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        return None
+    data = np.load(Path(run_dir) / "eval" / "evaluations.npz")
+    steps, returns, lengths = data["timesteps"], data["results"], data["ep_lengths"]
+    fig = Figure(figsize=(7, 4.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax, ax_len = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
+    ax.plot(steps, returns.mean(axis=1), label="mean")
+    ax.fill_between(steps, returns.min(axis=1), returns.max(axis=1), alpha=0.3, label="min-max")
+    ax.set_ylabel("evaluation return")
+    ax.set_title(f"{Path(run_dir).name}: deterministic evaluation episodes")
+    ax.legend()
+    ax_len.plot(steps, lengths.mean(axis=1))
+    ax_len.set_ylabel("episode length")
+    ax_len.set_xlabel("env steps")
+    out = Path(run_dir) / "learning_curve.png"
+    fig.savefig(out, dpi=100)
+    return out
+
+
 def _check_env_id(env_id: str) -> None:
     ids = [i for i in gym.registry if i.startswith("tether_gym/")]
     if env_id not in gym.registry:
@@ -158,6 +190,15 @@ def _latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None]:
         raise ConfigError(f"--resume: no checkpoint or final_model.zip in {run_dir}")
     _, model, stats = max(candidates, key=lambda c: c[0])
     return model, stats
+
+
+def _replay_buffer_beside(model_path: Path) -> Path | None:
+    """The replay buffer CheckpointCallback saved with a checkpoint (off-policy only)."""
+    if model_path.parent.name != "checkpoints":
+        return None
+    steps = model_path.stem.split("_")[-2]
+    path = model_path.parent / f"model_replay_buffer_{steps}_steps.pkl"
+    return path if path.is_file() else None
 
 
 def _make_venv(env_id, n_envs, seed, env_kwargs):
@@ -236,7 +277,13 @@ def _train(args, argv) -> int:
             eval_env.norm_reward = False
         model = algo_cls.load(model_path, env=venv, device="cpu",
                               tensorboard_log=str(out / "tb"))
-        print(f"resuming from {model_path} at step {model.num_timesteps}")
+        buffer = _replay_buffer_beside(model_path)
+        if buffer is not None and hasattr(model, "load_replay_buffer"):
+            model.load_replay_buffer(buffer)
+        print(f"resuming from {model_path} at step {model.num_timesteps}"
+              + (f" with its replay buffer "
+                 f"({model.replay_buffer.size() * model.replay_buffer.n_envs} transitions)"
+                 if buffer is not None and hasattr(model, "replay_buffer") else ""))
     else:
         if norm is not False:
             venv = VecNormalize(venv, gamma=gamma, **norm_kwargs)
@@ -263,7 +310,8 @@ def _train(args, argv) -> int:
                      best_model_save_path=str(out), deterministic=True, verbose=args.verbose),
         CheckpointCallback(save_freq=max(ckpt_freq // n_envs, 1),
                            save_path=str(out / "checkpoints"), name_prefix="model",
-                           save_vecnormalize=True),
+                           save_vecnormalize=True,
+                           save_replay_buffer=hasattr(model, "replay_buffer")),
     ]
     t0 = time.perf_counter()
     model.learn(timesteps, callback=callbacks, progress_bar=not args.no_progress,
@@ -280,6 +328,7 @@ def _train(args, argv) -> int:
             "torch_threads": args.torch_threads, "command": command,
             "tether_gym": tether_gym.__version__}
     info_path.write_text(json.dumps(info, indent=2))
+    plot_learning_curve(out)
     venv.close()
     eval_env.close()
     print(f"trained {args.algo.upper()} to step {model.num_timesteps} in {wall:.0f} s; run "

@@ -45,7 +45,7 @@ _SINGLE = {"observation_space": "single_observation_space",
 
 def make_sb3_vec_env(num_envs: int = 1, seed: int | None = None,
                      env_kwargs: dict[str, Any] | None = None, monitor: bool = False,
-                     parallel: bool = False) -> TetherSB3VecEnv:
+                     parallel: bool | str = "auto") -> TetherSB3VecEnv:
     """SB3 VecEnv of ``num_envs`` TetherLibration envs on one native vector env.
 
     Parameters
@@ -61,13 +61,13 @@ def make_sb3_vec_env(num_envs: int = 1, seed: int | None = None,
     monitor : bool
         Report Monitor-style ``"episode"`` infos (see the module docstring); off by
         default: wrap in ``VecMonitor`` instead.
-    parallel : bool
+    parallel : bool or "auto"
         Step the sub-envs on numba's threads (see
-        :class:`~tether_gym.envs.vector.TetherLibrationVectorEnv`).
+        :class:`~tether_gym.envs.vector.TetherLibrationVectorEnv`; "auto": from 128
+        sub-envs on).
     """
     kwargs = dict(env_kwargs or {})
-    if parallel:
-        kwargs["parallel"] = True
+    kwargs.setdefault("parallel", parallel)
     venv = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         **kwargs)
     env = TetherSB3VecEnv(venv, monitor=monitor)

@@ -220,7 +220,7 @@ class ReelParams:
 
     accel_limit: float | None = 0.01
     speed_limit: float | None = None
-    time_constant: float = 0.005
+    time_constant: float = 0.0125
 
     def __post_init__(self) -> None:
         if self.accel_limit is not None:

@@ -134,3 +134,15 @@ def test_corrupt_or_missing_agent(tmp_path):
         TrainedAgent.load(bad)
     assert evaluate_main([str(bad), "--seeds", "1", "--suite", "paper", "--no-plots",
                           "--out", str(tmp_path / "ev")]) == 2
+
+
+def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
+    out = tmp_path / "sac"
+    cfg = ["--config", str(_tiny_sac_config(tmp_path))]
+    assert main(["--algo", "sac", "--out", str(out), "--timesteps", "512", *cfg, *TINY]) == 0
+    assert list((out / "checkpoints").glob("model_replay_buffer_*_steps.pkl"))
+    capsys.readouterr()
+    assert main(["--algo", "sac", "--out", str(out), "--timesteps", "256", "--resume",
+                 *TINY]) == 0
+    # 2 envs x 255 steps: the checkpoint at step 512 precedes storing that step's pair
+    assert "with its replay buffer (510 transitions)" in capsys.readouterr().out

@@ -21,8 +21,10 @@ REWARD_LOW, REWARD_HIGH = 0.0, 1.0
 INFO_KEYS = (
     "nu", "theta", "dtheta", "length", "dlength", "tension", "theta_ref", "dtheta_ref",
     "failure", "reward_tracking", "reward_effort", "reward_accel", "reward_slack",
+    "reward_length",
 )
-REWARD_COMPONENTS = ("reward_tracking", "reward_effort", "reward_accel", "reward_slack")
+REWARD_COMPONENTS = ("reward_tracking", "reward_effort", "reward_accel", "reward_slack",
+                     "reward_length")
 
 # Warnings that check_env may raise and that we accept; keep this list short.
 ALLOWED_WARNINGS = (

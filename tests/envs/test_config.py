@@ -93,7 +93,7 @@ def test_defaults_match_registration_and_paper_case():
     assert cfg.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS == 754
     assert cfg.max_episode_steps == math.ceil(3 * 2 * math.pi / 0.025)
     assert gym.spec(ENV_ID).max_episode_steps == cfg.max_episode_steps
-    assert cfg.n_substeps == 5
+    assert cfg.n_substeps == 2  # 0.025 rad control step, 0.0125 rad RK4 step
     assert cfg.masses == (1.0, 2.0) and cfg.initial_lengths == (0.5, 0.5)
     assert cfg.initial_theta == (0.1, 0.0)
 

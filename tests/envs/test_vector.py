@@ -290,6 +290,21 @@ def test_invalid_arguments_are_rejected_with_the_value():
         TetherLibrationVectorEnv(2, parallel="yes")
 
 
+def test_gymnasium_vector_wrappers_work():
+    from gymnasium.wrappers.vector import ClipAction, NormalizeObservation, RecordEpisodeStatistics
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        env = RecordEpisodeStatistics(NormalizeObservation(ClipAction(make_vec(3, **SHORT))))
+        env.reset(seed=0)
+        lengths = []
+        for _ in range(27):  # 13 steps, the auto-reset step, 13 steps
+            *_, info = env.step(2.0 * env.action_space.sample())
+            if "episode" in info:
+                lengths += info["episode"]["l"][info["_episode"]].tolist()
+    assert lengths == [13] * 6
+
+
 def test_returned_arrays_are_not_reused():
     env = TetherLibrationVectorEnv(2)
     obs, info = env.reset(seed=0)
@@ -319,3 +334,18 @@ def test_render_rgb_array_gives_one_frame_per_env():
     env.close()
     with pytest.warns(UserWarning, match="render_mode"):
         assert make_vec(1).render() is None
+
+
+def test_parallel_auto_threads_only_large_batches():
+    """parallel="auto" (the default) is serial below PARALLEL_MIN_ENVS, threaded from it."""
+    import numba
+
+    from tether_gym.envs.vector import PARALLEL_MIN_ENVS
+
+    small = TetherLibrationVectorEnv(4)
+    assert small.parallel == "auto" and small._n_chunks(4) == 0
+    big = TetherLibrationVectorEnv(PARALLEL_MIN_ENVS)
+    expected = 0 if numba.get_num_threads() < 2 else min(4 * numba.get_num_threads(),
+                                                          PARALLEL_MIN_ENVS)
+    assert big._n_chunks(PARALLEL_MIN_ENVS) == expected
+    assert TetherLibrationVectorEnv(PARALLEL_MIN_ENVS, parallel=False)._n_chunks(200) == 0

@@ -88,6 +88,7 @@ class ChainBatch:
         # config properties that build objects, evaluated once (step() runs per env step)
         self._accel_scale = config.accel_scale
         self._accel_reference = config.accel_reference
+        self._length_nominal = np.asarray(config.initial_lengths, dtype=float)
         self._n_substeps = config.n_substeps
         self._length_min, self._length_max = config.length_bounds
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
@@ -168,7 +169,8 @@ class ChainBatch:
                 self._draw_noise(b, rngs[b])
         tail = (self.nu, self.y, action, cfg.max_reel_rate, self.dist, self.par,
                 cfg.physics_step, self._n_substeps, cfg.amplitude, cfg.frequency, self.weights,
-                self._length_min, self._length_max, self._accel_reference, self.with_params,
+                self._length_min, self._length_max, self._accel_reference, self._length_nominal,
+                self.with_params,
                 self.noise, self.obs, self.reward, self.components, self.failure,
                 self.tension_min, self.tension_end, self.deriv_end)
         if rows is None and n_chunks <= 0:

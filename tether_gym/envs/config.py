@@ -60,11 +60,11 @@ class EnvConfig:
     amplitude: float = 0.2
     frequency: float = 1.0
     control_step: float = 0.025
-    physics_step: float = 0.005
+    physics_step: float = 0.0125
     max_reel_rate: float = 0.5
     accel_limit: float | None = 0.01
     speed_limit: float | None = None
-    reel_time_constant: float = 0.005
+    reel_time_constant: float = 0.0125
     length_bounds: tuple[float, float] = (0.05, 1.5)
     orbits_per_episode: float = 3.0
     init_theta_range: float = 0.0

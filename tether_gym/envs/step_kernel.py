@@ -1,8 +1,10 @@
 """One compiled control step for a batch of environments: physics, task, observation.
 
 Both :class:`~tether_gym.envs.TetherLibrationEnv` (a batch of one) and
-:class:`~tether_gym.envs.TetherLibrationVectorEnv` call :func:`step_batch`, so their
-trajectories are identical for the same inputs.
+:class:`~tether_gym.envs.vector.TetherLibrationVectorEnv` step through
+:func:`_step_row` (:func:`step_batch` over all rows, :func:`step_rows` over some,
+:func:`step_rows_parallel` over some on numba's threads), so their trajectories are
+identical for the same inputs.
 
 Observation layout (float32), n = N-1 tethers:
 ``[sin nu, cos nu, theta (n), theta' (n), l (n), l' (n), theta_d, theta_d'``
@@ -23,10 +25,10 @@ from ..tasks.termination import failure_code
 __all__ = ["step_batch", "step_rows", "step_rows_parallel", "info_batch", "write_obs",
            "N_COMPONENTS"]
 
-N_COMPONENTS = 4
+N_COMPONENTS = 5
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def write_obs(nu, y, amplitude, frequency, par, with_params, noise, out):
     """Fill one observation row; ``noise`` (4n,) is added to [theta, theta', l, l']."""
     m = y.shape[0]
@@ -47,7 +49,7 @@ def write_obs(nu, y, amplitude, frequency, par, with_params, noise, out):
 
 @njit(cache=True)
 def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-               weights, length_min, length_max, accel_ref, with_params, noise,
+               weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
                obs, reward, components, failure, tension_min, tension_end, deriv_end):
     """Advance every environment of the batch by one control step, in place.
 
@@ -59,6 +61,7 @@ def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, fre
     dist : (B, n)  disturbance on theta'' held over the step (paper Eq. 20).
     par : (B, 6+n) or (1, 6+n)  kernel parameter rows.
     weights : tuple  RewardWeights.as_tuple().
+    length_nominal : (n,)  nominal tether lengths l_i,nom [-] of the length penalty.
     noise : (B, 4n)  observation noise.
     obs, reward, components, failure, tension_min, tension_end, deriv_end : outputs.
 
@@ -69,26 +72,29 @@ def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, fre
     work = _row_work(m // 4)
     for b in range(batch):
         _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-                  weights, length_min, length_max, accel_ref, with_params, noise, obs, reward,
+                  weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
+                  obs, reward,
                   components, failure, tension_min, tension_end, deriv_end, work)
 
 
 @njit(cache=True)
 def step_rows(rows, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-              weights, length_min, length_max, accel_ref, with_params, noise,
+              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
               obs, reward, components, failure, tension_min, tension_end, deriv_end):
     """:func:`step_batch` restricted to the row indices ``rows`` (int64); others untouched."""
     work = _row_work(y.shape[1] // 4)
     for i in range(rows.shape[0]):
         _step_row(rows[i], nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude,
-                  frequency, weights, length_min, length_max, accel_ref, with_params, noise,
+                  frequency, weights, length_min, length_max, accel_ref, length_nominal,
+                  with_params, noise,
                   obs, reward, components, failure, tension_min, tension_end, deriv_end, work)
 
 
 @njit(cache=True, parallel=True)
 def step_rows_parallel(rows, n_chunks, nu, y, action, max_reel_rate, dist, par, h, n_sub,
                        amplitude, frequency, weights, length_min, length_max, accel_ref,
-                       with_params, noise, obs, reward, components, failure, tension_min,
+                       length_nominal, with_params, noise, obs, reward, components, failure,
+                       tension_min,
                        tension_end, deriv_end):
     """:func:`step_rows` on numba's threads: ``n_chunks`` contiguous chunks of ``rows``.
 
@@ -101,8 +107,9 @@ def step_rows_parallel(rows, n_chunks, nu, y, action, max_reel_rate, dist, par, 
         work = _row_work(n)
         for i in range(c * count // n_chunks, (c + 1) * count // n_chunks):
             _step_row(rows[i], nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude,
-                      frequency, weights, length_min, length_max, accel_ref, with_params,
-                      noise, obs, reward, components, failure, tension_min, tension_end,
+                      frequency, weights, length_min, length_max, accel_ref, length_nominal,
+                      with_params, noise, obs, reward, components, failure, tension_min,
+                      tension_end,
                       deriv_end, work)
 
 
@@ -112,9 +119,10 @@ def _row_work(n):
     return (kernels.make_scratch(n), np.empty(n), np.empty(n), np.empty(n), np.empty(4 * n))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-              weights, length_min, length_max, accel_ref, with_params, noise, obs, reward,
+              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise, obs,
+              reward,
               components, failure, tension_min, tension_end, deriv_end, work):
     """One control step of row b (the body shared by every batched entry point)."""
     scratch, cmd, act, accel, prev = work
@@ -156,8 +164,9 @@ def _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, f
         phase = frequency * nu_new
         ref = amplitude * math.sin(phase)
         dref = amplitude * frequency * math.cos(phase)
-        reward[b] = reward_terms(yb[0:n], yb[n:2 * n], ref, dref, act, accel,
-                                 tension_min[b], weights, components[b])
+        reward[b] = reward_terms(yb[0:n], yb[n:2 * n], yb[2 * n:3 * n], ref, dref, act,
+                                 accel, tension_min[b], length_nominal, weights,
+                                 components[b])
     write_obs(nu_new, yb, amplitude, frequency, pb, with_params, noise[b], obs[b])
 
 

@@ -99,12 +99,13 @@ class TetherLibrationEnv(gym.Env):
         p = w_effort mean(a_i^2)                              reel effort [0.05]
           + w_accel mean(min(1, (L_ddot_i / a_ref)^2))        harsh reel accelerations [0.05]
           + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2) closeness to slack [0.2, T_safe 0.5]
+          + w_length mean(min(1, ((l_i - l_i,nom) / 0.5)^2))  length drift [0.2]
 
-    with sigma = 0.05 rad and a_ref the acceleration limit (0.01 m/s^2 without one).
-    r lies in [0, 1] (the weights sum to at most 1), so ending an episode early never
-    pays. ``info`` holds ``reward_tracking`` = r_track and the penalties
-    ``reward_effort``, ``reward_accel``, ``reward_slack`` (each -r_track times its
-    term, <= 0); they add up to r.
+    with sigma = 0.05 rad, a_ref the acceleration limit (0.01 m/s^2 without one) and
+    l_i,nom = ``initial_lengths``. r lies in [0, 1] (the weights sum to at most 1), so
+    ending an episode early never pays. ``info`` holds ``reward_tracking`` = r_track
+    and the penalties ``reward_effort``, ``reward_accel``, ``reward_slack``,
+    ``reward_length`` (each -r_track times its term, <= 0); they add up to r.
 
     ## Starting State
 
@@ -147,11 +148,11 @@ class TetherLibrationEnv(gym.Env):
     | gravity              | "gradient"     | "gradient" or "full"                            |
     | amplitude, frequency | 0.2, 1         | A [rad] and w [-] of theta_d = A sin(w nu)      |
     | control_step         | 0.025          | true anomaly per env step [rad]                 |
-    | physics_step         | 0.005          | RK4 step [rad]; divides control_step            |
+    | physics_step         | 0.0125         | RK4 step [rad]; divides control_step            |
     | max_reel_rate        | 0.5            | l'_cmd at abs(action) = 1 [-]                   |
     | accel_limit          | 0.01           | reel acceleration limit [m/s^2]; None: off      |
     | speed_limit          | None           | reel speed limit [m/s]                          |
-    | reel_time_constant   | 0.005          | reel lag tau [rad] (>= physics_step / 2)        |
+    | reel_time_constant   | 0.0125         | reel lag tau [rad] (>= physics_step / 2)        |
     | length_bounds        | (0.05, 1.5)    | allowed l_i [-]                                 |
     | orbits_per_episode   | 3              | episode length [orbits]                         |
     | init_theta_range     | 0              | half-width of the theta_i(0) draw [rad]         |

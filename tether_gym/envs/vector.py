@@ -57,6 +57,10 @@ def _check_reset_mask(mask, num_envs: int) -> np.ndarray:
     return mask
 
 
+PARALLEL_MIN_ENVS = 128
+"""From this many sub-envs on, ``parallel="auto"`` steps them on numba's threads."""
+
+
 class TetherLibrationVectorEnv(VectorEnv):
     r"""``num_envs`` independent libration environments stepped by one compiled kernel.
 
@@ -110,16 +114,17 @@ class TetherLibrationVectorEnv(VectorEnv):
     ``num_envs`` (>= 1), ``max_episode_steps`` (see above), ``render_mode`` (None or
     "rgb_array"; ``render()`` returns one frame per sub-env), ``parallel`` (False:
     one thread; True: spread the sub-envs over numba's threads, ``NUMBA_NUM_THREADS``
-    or ``numba.set_num_threads``; it pays only with idle cores and hundreds of envs,
-    see bench/README.md; the results are bitwise the same either way) and every
-    keyword argument of the single env.
+    or ``numba.set_num_threads``; "auto", the default: threads from
+    ``PARALLEL_MIN_ENVS`` = 128 sub-envs on, where they pay on idle cores (see
+    bench/README.md); the results are bitwise the same either way) and every keyword
+    argument of the single env.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30,
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None,
-                 render_mode: str | None = None, parallel: bool = False, **kwargs):
+                 render_mode: str | None = None, parallel: bool | str = "auto", **kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
                             f"{num_envs!r}")
@@ -134,14 +139,14 @@ class TetherLibrationVectorEnv(VectorEnv):
         if render_mode == "human":
             raise ValueError("render_mode='human' is not supported by the vector env; use "
                              "'rgb_array' (render() returns one frame per sub-env) or None")
-        if not isinstance(parallel, (bool, np.bool_)):
-            raise TypeError(f"parallel={parallel!r} must be True or False")
+        if not (isinstance(parallel, (bool, np.bool_)) or parallel == "auto"):
+            raise TypeError(f"parallel={parallel!r} must be True, False or 'auto'")
         self.config = EnvConfig.from_kwargs(render_mode=render_mode, **kwargs)
         self.num_envs = int(num_envs)
         self.max_episode_steps = (None if max_episode_steps in (None, -1)
                                   else int(max_episode_steps))
         self.render_mode = self.config.render_mode
-        self.parallel = bool(parallel)
+        self.parallel = parallel if parallel == "auto" else bool(parallel)
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
@@ -189,7 +194,10 @@ class TetherLibrationVectorEnv(VectorEnv):
             return 0
         import numba
 
-        return min(4 * numba.get_num_threads(), rows)
+        threads = numba.get_num_threads()
+        if self.parallel == "auto" and (rows < PARALLEL_MIN_ENVS or threads < 2):
+            return 0
+        return min(4 * threads, rows)
 
     # ------------------------------------------------------------------ #
     def reset(self, *, seed: int | list[int | None] | None = None,

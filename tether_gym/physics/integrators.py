@@ -31,17 +31,16 @@ def make_rk4(fun, compiled=True):
     step : function
         ``step(t, y, h, args, k1, work, out)``: one RK4 step of size ``h`` from
         (t, y), where ``k1 = fun(t, y)`` was already evaluated by the caller (so a
-        caller that needs f at the step's start pays for it once). ``work`` is
-        scratch of shape (4, len(y)); ``out`` receives y(t + h) and may not alias y.
+        caller that needs f at the step's start pays for it once). ``work`` is a
+        tuple of four scratch arrays shaped like y (a tuple, not a 2-D array, so
+        that no views are made per step); ``out`` receives y(t + h) and may not
+        alias y.
     """
 
     @njit(cache=True)
     def step(t, y, h, args, k1, work, out):  # pragma: no cover - compiled
         m = y.shape[0]
-        k2 = work[0]
-        k3 = work[1]
-        k4 = work[2]
-        tmp = work[3]
+        k2, k3, k4, tmp = work
         half = 0.5 * h
         for i in range(m):
             tmp[i] = y[i] + half * k1[i]
@@ -70,7 +69,7 @@ def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
     out = np.empty((n_steps + 1, m))
     out[0] = y
     k1 = np.empty(m)
-    work = np.empty((4, m))
+    work = (np.empty(m), np.empty(m), np.empty(m), np.empty(m))
     for i in range(n_steps):
         t = t0 + i * h
         fun(t, out[i], args, k1)

@@ -72,72 +72,69 @@ def pack_params(eccentricity, tail_masses, gravity=GRAVITY_GRADIENT, length_rati
 # --------------------------------------------------------------------------- #
 # equations of motion
 # --------------------------------------------------------------------------- #
-@njit(cache=True)
-def _assemble(nu, theta, dtheta, length, par, S, rhs, P, Q, V):
-    """Fill the affine theta-equations (rows scaled by l_j) and link quantities.
+# Hot helpers are inlined (inline="always") and index one state row
+# y = [theta, theta', l, l'] with offsets instead of slicing it: a call or a view
+# passes arrays as reference-counted structs, which cost more than the arithmetic.
+@njit(cache=True, inline="always", error_model="numpy")
+def _links(nu, y, n, par, V):
+    """Link trigonometry and the projected tail gravity; returns (q, sin nu, k).
 
-    S <- diag(l) A (symmetric), rhs[:, 0] <- -diag(l) b0, P <- P, Q <- Q (unscaled).
-    V rows: 0 cos th, 1 sin th, 2 w = 1 + th', 3 G^perp, 4 G^par, 5..8 scratch.
+    V rows: 0 cos th, 1 sin th, 2 w = 1 + th', 3 G^perp, 4 G^par, 5..6 scratch.
     """
-    n = theta.shape[0]
     ecc = par[P_ECC]
     sn = math.sin(nu)
     k = 1.0 + ecc * math.cos(nu)
     q = 2.0 * ecc * sn / k
-    ct = V[0]
-    st = V[1]
-    w = V[2]
-    gperp = V[3]
-    gpar = V[4]
-    gr = V[5]
-    gv = V[6]
     for i in range(n):
-        ct[i] = math.cos(theta[i])
-        st[i] = math.sin(theta[i])
-        w[i] = 1.0 + dtheta[i]
+        V[0, i] = math.cos(y[i])
+        V[1, i] = math.sin(y[i])
+        V[2, i] = 1.0 + y[n + i]
     # body positions rho_i and their gravity g_i (relative to the main satellite)
     rr = 0.0
     rv = 0.0
     full = par[P_GRAV] == GRAVITY_FULL
     eps = par[P_EPS]
     for i in range(n):
-        rr -= length[i] * ct[i]
-        rv -= length[i] * st[i]
+        rr -= y[2 * n + i] * V[0, i]
+        rv -= y[2 * n + i] * V[1, i]
         if full:
             xr = k * eps * rr
             xv = k * eps * rv
             qq = 2.0 * xr + xr * xr + xv * xv
             fm = math.expm1(-1.5 * math.log1p(qq))  # |e_r + x|^-3 - 1
             scale = -1.0 / (k * k * eps)
-            gr[i] = scale * (fm + xr * (1.0 + fm))
-            gv[i] = scale * (xv * (1.0 + fm))
+            V[5, i] = scale * (fm + xr * (1.0 + fm))
+            V[6, i] = scale * (xv * (1.0 + fm))
         else:
-            gr[i] = 2.0 * rr / k
-            gv[i] = -rv / k
+            V[5, i] = 2.0 * rr / k
+            V[6, i] = -rv / k
     # tail sums G_j = sum_{i>=j} M_i g_i, projected on e_j^perp and e_j
     Gr = 0.0
     Gv = 0.0
-    tail = par[P_TAIL:]
     for j in range(n - 1, -1, -1):
-        mass = tail[j] - (tail[j + 1] if j + 1 < n else 0.0)
-        Gr += mass * gr[j]
-        Gv += mass * gv[j]
-        gperp[j] = -Gr * st[j] + Gv * ct[j]
-        gpar[j] = Gr * ct[j] + Gv * st[j]
-    for j in range(n):
-        b0 = gperp[j]
-        for kk in range(n):
-            mt = tail[max(j, kk)]
-            c = ct[kk] * ct[j] + st[kk] * st[j]
-            s = st[kk] * ct[j] - ct[kk] * st[j]
-            S[j, kk] = mt * length[j] * length[kk] * c
-            P[j, kk] = mt * (2.0 * w[kk] * c - q * s)
-            Q[j, kk] = mt * s
-            b0 -= mt * length[kk] * w[kk] * (w[kk] * s + q * c)
-        rhs[j, 0] = -length[j] * b0
+        mass = par[P_TAIL + j] - (par[P_TAIL + j + 1] if j + 1 < n else 0.0)
+        Gr += mass * V[5, j]
+        Gv += mass * V[6, j]
+        V[3, j] = -Gr * V[1, j] + Gv * V[0, j]
+        V[4, j] = Gr * V[0, j] + Gv * V[1, j]
+    return q, sn, k
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
+def _coefficients(j, kk, y, n, par, V, q):
+    """Entries (j, k) of the theta-equations: (diag(l) A, P, Q, b0 term) (module doc)."""
+    mt = par[P_TAIL + max(j, kk)]
+    c = V[0, kk] * V[0, j] + V[1, kk] * V[1, j]
+    s = V[1, kk] * V[0, j] - V[0, kk] * V[1, j]
+    lk = y[2 * n + kk]
+    wk = V[2, kk]
+    return (mt * y[2 * n + j] * lk * c,
+            mt * (2.0 * wk * c - q * s),
+            mt * s,
+            -mt * lk * wk * (wk * s + q * c))
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _solve_spd(S, R):
     """R <- S^-1 R for symmetric positive definite S (destroyed), R of shape (n, m)."""
     n = S.shape[0]
@@ -159,42 +156,85 @@ def _solve_spd(S, R):
             R[p, c] = acc / S[p, p]
 
 
-@njit(cache=True)
-def _accel(nu, theta, dtheta, length, dlength, ddlength, par, S, R, P, Q, V, ddtheta, tension):
-    """theta'' and T^ for one state; R is (n, 1) scratch."""
-    n = theta.shape[0]
-    _assemble(nu, theta, dtheta, length, par, S, R, P, Q, V)
+@njit(cache=True, inline="always", error_model="numpy")
+def _theta_ddot(y, n, ddl, ddl_off, par, S, R, V, q, out, out_off):
+    """theta'' into out[out_off:] from V (after :func:`_links`); l'' = ddl[ddl_off:]."""
     for j in range(n):
-        acc = 0.0
+        b = V[3, j]
         for kk in range(n):
-            acc += P[j, kk] * dlength[kk] + Q[j, kk] * ddlength[kk]
-        R[j, 0] -= length[j] * acc
+            s_jk, p_jk, q_jk, b_jk = _coefficients(j, kk, y, n, par, V, q)
+            S[j, kk] = s_jk
+            b += b_jk + p_jk * y[3 * n + kk] + q_jk * ddl[ddl_off + kk]
+        R[j, 0] = -y[2 * n + j] * b
     _solve_spd(S, R)
-    ecc = par[P_ECC]
-    q = 2.0 * ecc * math.sin(nu) / (1.0 + ecc * math.cos(nu))
-    ct = V[0]
-    st = V[1]
-    w = V[2]
-    tail = par[P_TAIL:]
     for j in range(n):
-        ddtheta[j] = R[j, 0]
+        out[out_off + j] = R[j, 0]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _tension(y, n, ddl, ddl_off, ddth, ddth_off, par, V, q, tension):
+    """T^ from the e_j components of (*) (module docstring)."""
     for j in range(n):
         acc = -V[4, j]
         for kk in range(n):
-            mt = tail[max(j, kk)]
-            c = ct[kk] * ct[j] + st[kk] * st[j]
-            s = st[kk] * ct[j] - ct[kk] * st[j]
-            lam = ddlength[kk] - q * dlength[kk]
-            sig = w[kk] * (2.0 * dlength[kk] - q * length[kk])
-            acc += mt * (-(lam - length[kk] * w[kk] * w[kk]) * c
-                         + (length[kk] * ddtheta[kk] + sig) * s)
+            mt = par[P_TAIL + max(j, kk)]
+            c = V[0, kk] * V[0, j] + V[1, kk] * V[1, j]
+            s = V[1, kk] * V[0, j] - V[0, kk] * V[1, j]
+            lk = y[2 * n + kk]
+            dlk = y[3 * n + kk]
+            wk = V[2, kk]
+            lam = ddl[ddl_off + kk] - q * dlk
+            sig = wk * (2.0 * dlk - q * lk)
+            acc += mt * (-(lam - lk * wk * wk) * c + (lk * ddth[ddth_off + kk] + sig) * s)
         tension[j] = acc
+
+
+@njit(cache=True, error_model="numpy")
+def _accel(nu, y, ddlength, par, S, R, V, ddtheta, tension):
+    """theta'' and T^ for one state row y and its l''; R is (n, 1) scratch."""
+    n = ddlength.shape[0]
+    q, sn, k = _links(nu, y, n, par, V)
+    _theta_ddot(y, n, ddlength, 0, par, S, R, V, q, ddtheta, 0)
+    _tension(y, n, ddlength, 0, ddtheta, 0, par, V, q, tension)
+
+
+@njit(cache=True, error_model="numpy")
+def _assemble(nu, y, n, par, S, rhs, P, Q, V):
+    """Fill the affine theta-equations (rows scaled by l_j) for one state row y.
+
+    S <- diag(l) A (symmetric), rhs[:, 0] <- -diag(l) b0, P <- P, Q <- Q (unscaled).
+    """
+    q, sn, k = _links(nu, y, n, par, V)
+    for j in range(n):
+        b0 = V[3, j]
+        for kk in range(n):
+            s_jk, p_jk, q_jk, b_jk = _coefficients(j, kk, y, n, par, V, q)
+            S[j, kk] = s_jk
+            P[j, kk] = p_jk
+            Q[j, kk] = q_jk
+            b0 += b_jk
+        rhs[j, 0] = -y[2 * n + j] * b0
 
 
 # --------------------------------------------------------------------------- #
 # reel actuator
 # --------------------------------------------------------------------------- #
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
+def _reel(k, sn, dlength, command, ecc, a_bound, v_bound, tau):
+    """:func:`reel_ddlength` with k = 1 + e cos(nu) and sin(nu) given."""
+    k2 = k * k
+    k4 = k2 * k2
+    cmd = command
+    if v_bound < math.inf:
+        cap = v_bound / k2
+        cmd = min(max(cmd, -cap), cap)
+    coriolis = 2.0 * ecc * sn * k2 * k * dlength
+    a = k4 * (cmd - dlength) / tau - coriolis
+    a = min(max(a, -a_bound), a_bound)
+    return (a + coriolis) / k4
+
+
+@njit(cache=True, error_model="numpy")
 def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
     """Actual l'' [-] of one reel given its rate l' and the commanded rate l'_cmd.
 
@@ -203,53 +243,61 @@ def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
     L_ddot / (L0 n^2) = k^4 l'' - 2 e sin(nu) k^3 l' is saturated at +-a_bound; the
     command is first clipped to the speed bound |L_dot| / (L0 n) = k^2 |l'| <= v_bound.
     """
-    k = 1.0 + ecc * math.cos(nu)
-    k2 = k * k
-    k4 = k2 * k2
-    cmd = command
-    if v_bound < math.inf:
-        cap = v_bound / k2
-        cmd = min(max(cmd, -cap), cap)
-    coriolis = 2.0 * ecc * math.sin(nu) * k2 * k * dlength
-    a = k4 * (cmd - dlength) / tau - coriolis
-    a = min(max(a, -a_bound), a_bound)
-    return (a + coriolis) / k4
+    return _reel(1.0 + ecc * math.cos(nu), math.sin(nu), dlength, command, ecc, a_bound,
+                 v_bound, tau)
 
 
-@njit(cache=True)
-def controlled_rhs(nu, y, args, dy):
-    """dy/dnu of the chain with its reels.
-
-    ``args = (cmd, dist, par, S, R, P, Q, V, tension)``: commanded reel rates l'_cmd,
-    a disturbance d added to theta'' (paper Eq. 20, f_d = f + d), the parameter row
-    and scratch. Writes the tension T^ at (nu, y) into ``args[8]`` as a by-product.
-    """
-    cmd, dist, par, S, R, P, Q, V, tension = args
+@njit(cache=True, inline="always", error_model="numpy")
+def _controlled(nu, y, args, dy, with_tension):
+    cmd, dist, par, S, R, V, tension = args
     n = cmd.shape[0]
+    q, sn, k = _links(nu, y, n, par, V)
     ecc = par[P_ECC]
     for j in range(n):
         dl = y[3 * n + j]
-        dy[2 * n + j] = dl
-        dy[3 * n + j] = reel_ddlength(nu, dl, cmd[j], ecc, par[P_ABOUND], par[P_VBOUND], par[P_TAU])
         dy[j] = y[n + j]
-    _accel(nu, y[0:n], y[n:2 * n], y[2 * n:3 * n], y[3 * n:4 * n], dy[3 * n:4 * n], par,
-           S, R, P, Q, V, dy[n:2 * n], tension)
+        dy[2 * n + j] = dl
+        dy[3 * n + j] = _reel(k, sn, dl, cmd[j], ecc, par[P_ABOUND], par[P_VBOUND], par[P_TAU])
+    _theta_ddot(y, n, dy, 3 * n, par, S, R, V, q, dy, n)
+    if with_tension:
+        _tension(y, n, dy, 3 * n, dy, n, par, V, q, tension)
     for j in range(n):
         dy[n + j] += dist[j]
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def controlled_rhs(nu, y, args, dy):
+    """dy/dnu of the chain with its reels.
+
+    ``args = (cmd, dist, par, S, R, V, tension)``: commanded reel rates l'_cmd, a
+    disturbance d added to theta'' (paper Eq. 20, f_d = f + d), the parameter row and
+    scratch.
+    """
+    _controlled(nu, y, args, dy, False)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def controlled_rhs_tension(nu, y, args, dy):
+    """:func:`controlled_rhs` that also writes the tension T^ at (nu, y) into ``args[6]``.
+
+    The tension depends on theta'' but not the other way round, so it is computed
+    only where it is used (at the RK4 substep boundaries).
+    """
+    _controlled(nu, y, args, dy, True)
 
 
 rk4_step = make_rk4(controlled_rhs)
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def make_scratch(n):
     """Work arrays for :func:`advance_one` with n tethers."""
     m = 4 * n
-    return (np.empty((n, n)), np.empty((n, 1)), np.empty((n, n)), np.empty((n, n)),
-            np.empty((9, n)), np.empty(n), np.empty(m), np.empty((4, m)), np.empty(m))
+    return (np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(n), np.empty(m),
+            (np.empty(m), np.empty(m), np.empty(m), np.empty(m)), np.empty(m))
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always", error_model="numpy")
 def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end, tension_end):
     """Advance one state (nu, y) by ``n_sub`` RK4 steps of size ``h`` [rad]; y in place.
 
@@ -257,27 +305,28 @@ def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end
     substep boundaries (both ends included), ``deriv_end`` dy/dnu at the final state
     (it holds theta'' and l''), ``tension_end`` T^ at the final state.
     """
-    S, R, P, Q, V, tens, k1, work, ybuf = scratch
+    S, R, V, tens, k1, work, ybuf = scratch
     n = cmd.shape[0]
-    args = (cmd, dist, par, S, R, P, Q, V, tens)
+    args = (cmd, dist, par, S, R, V, tens)
     t = nu
     for j in range(n):
         tension_min[j] = math.inf
     for i in range(n_sub):
-        controlled_rhs(t, y, args, k1)
+        controlled_rhs_tension(t, y, args, k1)
         for j in range(n):
             tension_min[j] = min(tension_min[j], tens[j])
         rk4_step(t, y, h, args, k1, work, ybuf)
-        y[:] = ybuf
+        for j in range(4 * n):
+            y[j] = ybuf[j]
         t = nu + (i + 1) * h
-    controlled_rhs(t, y, args, deriv_end)
+    controlled_rhs_tension(t, y, args, deriv_end)
     for j in range(n):
         tension_end[j] = tens[j]
         tension_min[j] = min(tension_min[j], tens[j])
     return t
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end):
     """Batched :func:`advance_one`: every row of (nu (B,), y (B, 4n)) in place.
 
@@ -296,23 +345,31 @@ def advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end
 # --------------------------------------------------------------------------- #
 # batched evaluations behind TetherChain
 # --------------------------------------------------------------------------- #
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
+def _pack_row(theta, dtheta, length, dlength, n, row):
+    for j in range(n):
+        row[j] = theta[j]
+        row[n + j] = dtheta[j]
+        row[2 * n + j] = length[j]
+        row[3 * n + j] = dlength[j]
+
+
+@njit(cache=True, error_model="numpy")
 def accel_batch(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension):
     """theta'' and T^ for a batch of states (arrays of shape (B,) and (B, n))."""
     batch, n = theta.shape
     S = np.empty((n, n))
     R = np.empty((n, 1))
-    P = np.empty((n, n))
-    Q = np.empty((n, n))
     V = np.empty((9, n))
+    row = np.empty(4 * n)
     shared = par.shape[0] == 1
     for b in range(batch):
         pb = par[0] if shared else par[b]
-        _accel(nu[b], theta[b], dtheta[b], length[b], dlength[b], ddlength[b], pb,
-               S, R, P, Q, V, ddtheta[b], tension[b])
+        _pack_row(theta[b], dtheta[b], length[b], dlength[b], n, row)
+        _accel(nu[b], row, ddlength[b], pb, S, R, V, ddtheta[b], tension[b])
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
     """(f, B, D) of theta'' = f + B l' + D l'' for a batch of states."""
     batch, n = theta.shape
@@ -321,10 +378,12 @@ def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
     P = np.empty((n, n))
     Q = np.empty((n, n))
     V = np.empty((9, n))
+    row = np.zeros(4 * n)
     shared = par.shape[0] == 1
     for b in range(batch):
         pb = par[0] if shared else par[b]
-        _assemble(nu[b], theta[b], dtheta[b], length[b], pb, S, R[:, 0:1], P, Q, V)
+        _pack_row(theta[b], dtheta[b], length[b], row[3 * n:], n, row)
+        _assemble(nu[b], row, n, pb, S, R[:, 0:1], P, Q, V)
         for j in range(n):
             lj = length[b, j]
             for kk in range(n):
@@ -338,7 +397,7 @@ def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
                 Dmat[b, j, kk] = R[j, 1 + n + kk]
 
 
-@njit(cache=True)
+@njit(cache=True, error_model="numpy")
 def reel_batch(nu, dlength, command, par, out):
     """Vectorised :func:`reel_ddlength` over a batch (B,), (B, n)."""
     batch, n = dlength.shape
