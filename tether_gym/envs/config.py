@@ -23,7 +23,7 @@ from ..params import (
     as_float_tuple,
     check_range,
 )
-from ..physics import kernels
+from ..physics import TetherChain, kernels
 from ..tasks.reward import RewardWeights
 
 __all__ = ["EnvConfig", "PAPER_INITIAL_THETA"]
@@ -184,6 +184,12 @@ class EnvConfig:
     @property
     def reel(self) -> ReelParams:
         return ReelParams(self.accel_limit, self.speed_limit, self.reel_time_constant)
+
+    @property
+    def model(self) -> TetherChain:
+        """The chain with the configured (nominal) e, masses and gravity model."""
+        return TetherChain(self.masses, self.eccentricity, self.gravity,
+                           self.total_tether_length / self.semi_latus_rectum)
 
     @property
     def n_substeps(self) -> int:

@@ -99,7 +99,8 @@ class TetherLibrationEnv(gym.Env):
         p = w_effort mean(a_i^2)                              reel effort [0.05]
           + w_accel mean(min(1, (L_ddot_i / a_ref)^2))        harsh reel accelerations [0.05]
           + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2) closeness to slack [0.2, T_safe 0.5]
-          + w_length mean(min(1, ((l_i - l_i,nom) / 0.5)^2))  length drift [0.2]
+          + w_length mean(x_i^2 / (1 + x_i^2))                length drift [0.3],
+                                      x_i = (l_i - l_i,nom) / 0.25
 
     with sigma = 0.05 rad, a_ref the acceleration limit (0.01 m/s^2 without one) and
     l_i,nom = ``initial_lengths``. r lies in [0, 1] (the weights sum to at most 1), so
@@ -194,9 +195,7 @@ class TetherLibrationEnv(gym.Env):
     @property
     def model(self) -> TetherChain:
         """The nominal physics model (config's e and masses) for model-based controllers."""
-        cfg = self.config
-        return TetherChain(cfg.masses, cfg.eccentricity, cfg.gravity,
-                           cfg.total_tether_length / cfg.semi_latus_rectum)
+        return self.config.model
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)

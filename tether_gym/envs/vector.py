@@ -167,9 +167,7 @@ class TetherLibrationVectorEnv(VectorEnv):
     @property
     def model(self) -> TetherChain:
         """The nominal physics model (config's e and masses) for model-based controllers."""
-        cfg = self.config
-        return TetherChain(cfg.masses, cfg.eccentricity, cfg.gravity,
-                           cfg.total_tether_length / cfg.semi_latus_rectum)
+        return self.config.model
 
     @property
     def np_random(self) -> tuple[np.random.Generator, ...]:
@@ -192,10 +190,14 @@ class TetherLibrationVectorEnv(VectorEnv):
         """Chunks for the threaded kernel (a few per thread), 0 for the serial one."""
         if not self.parallel or rows < 2:
             return 0
+        if self.parallel == "auto" and rows < PARALLEL_MIN_ENVS:
+            # decide before asking numba: get_num_threads() launches its thread pool,
+            # whose idle OpenMP workers spin and take half a core from the caller
+            return 0
         import numba
 
         threads = numba.get_num_threads()
-        if self.parallel == "auto" and (rows < PARALLEL_MIN_ENVS or threads < 2):
+        if self.parallel == "auto" and threads < 2:
             return 0
         return min(4 * threads, rows)
 
