@@ -192,6 +192,21 @@ def _latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None]:
     return model, stats
 
 
+def _continue_eval_history(callback, path: Path) -> None:
+    """Seed an EvalCallback with the evaluations a previous run saved (it would overwrite)."""
+    import numpy as np
+
+    with np.load(path) as data:
+        callback.evaluations_timesteps = list(data["timesteps"])
+        callback.evaluations_results = [list(r) for r in data["results"]]
+        callback.evaluations_length = [list(r) for r in data["ep_lengths"]]
+        if "successes" in data:
+            callback.evaluations_successes = [list(r) for r in data["successes"]]
+    returns = [float(np.mean(r)) for r in callback.evaluations_results]
+    if returns:
+        callback.best_mean_reward = max(returns)
+
+
 def _replay_buffer_beside(model_path: Path) -> Path | None:
     """The replay buffer CheckpointCallback saved with a checkpoint (off-policy only)."""
     if model_path.parent.name != "checkpoints":
@@ -313,6 +328,9 @@ def _train(args, argv) -> int:
                            save_vecnormalize=True,
                            save_replay_buffer=hasattr(model, "replay_buffer")),
     ]
+    history = out / "eval" / "evaluations.npz"
+    if args.resume and history.is_file():  # the learning curve continues, not restarts
+        _continue_eval_history(callbacks[0], history)
     t0 = time.perf_counter()
     model.learn(timesteps, callback=callbacks, progress_bar=not args.no_progress,
                 reset_num_timesteps=not args.resume, tb_log_name=args.algo)

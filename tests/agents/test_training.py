@@ -62,6 +62,9 @@ def test_resume_continues_step_counter(tmp_path):
     second = json.loads((out / "train_info.json").read_text())["num_timesteps"]
     assert second >= first + 512
     assert len((out / "command.txt").read_text().splitlines()) == 2
+    steps = np.load(out / "eval" / "evaluations.npz")["timesteps"]
+    assert steps[0] <= first < steps[-1]  # the learning curve continues across the resume
+    assert np.all(np.diff(steps) > 0)
 
 
 def test_resume_without_run_folder(tmp_path, capsys):

@@ -37,7 +37,7 @@ def test_tracking_term_formula():
     ({"action": (1.0, 0.0)}, "reward_effort", 0.05 * 0.5),
     ({"accel": (3.0, 0.5)}, "reward_accel", 0.05 * (1.0 + 0.25) / 2),
     ({"tension": (0.25, -1.0)}, "reward_slack", 0.2 * (0.25 + 1.0) / 2),
-    ({"length": (0.75, 1.5)}, "reward_length", 0.3 * (1 / 2 + 16 / 17) / 2),  # x = 1, 4
+    ({"length": (0.75, 1.5)}, "reward_length", 0.2 * (0.25 + 1.0) / 2),  # saturates at 1
 ])
 def test_each_penalty(kwargs, key, term):
     r, comp = _reward(**kwargs)
@@ -54,8 +54,8 @@ def test_bounds_at_the_extremes():
         assert 0.0 <= r <= 1.0
         assert r == pytest.approx(sum(comp.values()), abs=1e-14)
     worst, _ = _reward(theta=(0.2, 0.2), action=(1, 1), accel=(9, 9), tension=(-1, -1),
-                       length=(2, 2))  # x = 6 for the length term
-    assert worst == pytest.approx(1.0 - (0.05 + 0.05 + 0.2 + 0.3 * 36 / 37), abs=1e-15)
+                       length=(2, 2))
+    assert worst == pytest.approx(1.0 - 0.5, abs=1e-15)  # all penalties saturated
 
 
 def test_weights_validated():

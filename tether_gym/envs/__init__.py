@@ -1,6 +1,7 @@
-"""Gymnasium environments of tether_gym."""
+"""Gymnasium environments of tether_gym: the single env and its native vector env."""
 
 from .config import EnvConfig
 from .tether_libration import TetherLibrationEnv
+from .vector import TetherLibrationVectorEnv
 
-__all__ = ["EnvConfig", "TetherLibrationEnv"]
+__all__ = ["EnvConfig", "TetherLibrationEnv", "TetherLibrationVectorEnv"]

@@ -71,7 +71,8 @@ class ChainBatch:
         self.n = n
         self.nu = np.zeros(num)
         self.y = np.zeros((num, 4 * n))
-        self.par = np.tile(config.param_row(config.eccentricity, config.masses), (num, 1))
+        self._par_nominal = config.param_row(config.eccentricity, config.masses)
+        self.par = np.tile(self._par_nominal, (num, 1))
         self.dist = np.zeros((num, n))
         self.noise = np.zeros((num, 4 * n))
         self.obs = np.zeros((num, config.obs_dim), dtype=np.float32)
@@ -103,12 +104,15 @@ class ChainBatch:
         n = self.n
         opts = _check_options(options, n)
         ecc = cfg.eccentricity
-        masses = np.asarray(cfg.masses)
-        if cfg.eccentricity_range is not None:
-            ecc = float(rng.uniform(*cfg.eccentricity_range))
-        if cfg.mass_range is not None:
-            masses = masses * rng.uniform(1.0 - cfg.mass_range, 1.0 + cfg.mass_range, n)
-        self.par[b] = cfg.param_row(ecc, masses)
+        if cfg.randomised:
+            masses = np.asarray(cfg.masses)
+            if cfg.eccentricity_range is not None:
+                ecc = float(rng.uniform(*cfg.eccentricity_range))
+            if cfg.mass_range is not None:
+                masses = masses * rng.uniform(1.0 - cfg.mass_range, 1.0 + cfg.mass_range, n)
+            self.par[b] = cfg.param_row(ecc, masses)
+        else:  # the nominal row, built once in __init__
+            self.par[b] = self._par_nominal
         nu0 = float(opts.get("nu", cfg.initial_nu))
         ref, dref, _ = desired_libration(nu0, cfg.amplitude, cfg.frequency)
         theta = np.asarray(cfg.initial_theta) + rng.uniform(-1, 1, n) * cfg.init_theta_range

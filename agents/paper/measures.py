@@ -1,0 +1,113 @@
+"""Paper reproduction: metrics (pure functions of recorded arrays)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .runs import Trajectory
+from .settings import CONVERGENCE_TOL
+
+
+def swing(length: np.ndarray, length0: float) -> np.ndarray:
+    """(max l - min l) / l(0) per tether over the samples given [-]."""
+    length = np.asarray(length, dtype=float)
+    return (length.max(axis=0) - length.min(axis=0)) / length0
+
+
+def convergence_orbits(orbits: np.ndarray, error: np.ndarray,
+                       tol: float = CONVERGENCE_TOL) -> float | None:
+    """First time [orbits] after which ``error`` stays below ``tol``; None if never.
+
+    The time is that of the first sample of the final run of samples below ``tol``.
+    """
+    error = np.asarray(error, dtype=float)
+    above = np.nonzero(~(error < tol))[0]
+    if above.size == 0:
+        return float(orbits[0])
+    if above[-1] == error.shape[0] - 1:
+        return None
+    return float(orbits[above[-1] + 1])
+
+
+def chattering(orbits: np.ndarray, command: np.ndarray, start: float,
+               window: float = 0.02) -> dict | None:
+    """Chattering measures of the commands ``command[k]`` applied from ``orbits[k]``.
+
+    Over the steps from ``start`` [orbits] on, per tether (the table reports the max):
+
+    * ``tv_per_orbit``: total variation sum_k |u_{k+1} - u_k| per orbit [-];
+    * ``hf_fraction``: total variation of u minus its centred moving average over
+      ``window`` orbits, over the total variation of u on the same steps [-]: about
+      (window * 2 pi)^2 / 24 times the squared frequency content (~0.003) for a smooth
+      once- or twice-per-orbit signal, near 1 when step-to-step switching dominates;
+    * ``extrema_per_orbit``: local extrema of u per orbit (2 or 4 for a smooth signal
+      with one or two humps per orbit, of order 1 / control_step with chattering).
+
+    None when less than a quarter orbit (or fewer than two windows) is available.
+    """
+    t = np.asarray(orbits, dtype=float)[:command.shape[0]]
+    keep = t >= start
+    u = np.asarray(command, dtype=float)[keep]
+    if u.shape[0] < 3:
+        return None
+    dt = t[1] - t[0]
+    span = t[keep][-1] - t[keep][0] + dt
+    w = max(3, int(round(window / dt)) // 2 * 2 + 1)
+    if span < 0.25 or u.shape[0] < 2 * w:
+        return None
+    du = np.diff(u, axis=0)
+    tv = np.abs(du).sum(axis=0)
+    kernel = np.full(w, 1.0 / w)
+    tiny = 1e-12 * max(1.0, float(np.abs(u).max()))
+    hf = np.zeros(u.shape[1])
+    extrema = np.zeros(u.shape[1])
+    for i in range(u.shape[1]):
+        mean = np.convolve(u[:, i], kernel, mode="valid")
+        mid = u[w // 2:w // 2 + mean.shape[0], i]
+        tv_mid = np.abs(np.diff(mid)).sum()
+        hf[i] = np.abs(np.diff(mid - mean)).sum() / tv_mid if tv_mid > 0 else 0.0
+        sgn = np.sign(np.where(np.abs(du[:, i]) > tiny, du[:, i], 0.0))
+        sgn = sgn[sgn != 0]
+        extrema[i] = np.count_nonzero(sgn[1:] != sgn[:-1])
+    return {"tv_per_orbit": float((tv / span).max()), "hf_fraction": float(hf.max()),
+            "extrema_per_orbit": float((extrema / span).max()), "from_orbit": float(start),
+            "span_orbits": float(span), "window_orbits": float(w * dt)}
+
+
+def _after(traj: Trajectory, orbit: float = 1.0) -> np.ndarray:
+    return traj.orbits >= orbit - 1e-9
+
+
+def smc_metrics(traj: Trajectory) -> dict:
+    """The table's sliding-mode numbers for one run."""
+    err = traj.tracking_error
+    conv = convergence_orbits(traj.orbits, err)
+    after = _after(traj)
+    total = traj.length.sum(axis=1)
+    has_after = bool(after.any()) and traj.duration >= 1.0
+    start = conv if conv is not None else 1.0
+    ends = [float(k) for k in range(1, int(math.floor(traj.duration + 1e-9)) + 1)]
+    lengths_at = {f"{k:g}": traj.length[np.argmin(np.abs(traj.orbits - k))].tolist() for k in ends}
+    limit = traj.settings.get("accel_limit")
+    return {
+        "failure": traj.failure,
+        "duration_orbits": traj.duration,
+        "convergence_orbits": conv,
+        "max_error_after_orbit_1": float(err[after].max()) if has_after else None,
+        "rms_error_after_orbit_1": (float(np.sqrt(np.mean((traj.theta[after]
+                                                           - traj.theta_ref[after, None]) ** 2)))
+                                    if has_after else None),
+        "mean_total_length_after_orbit_1": float(total[after].mean()) if has_after else None,
+        "total_length_range_after_orbit_1": ([float(total[after].min()), float(total[after].max())]
+                                             if has_after else None),
+        "min_tension": float(traj.tension_min.min()),
+        "min_length": float(traj.length.min()),
+        "lengths_at_orbit_end": lengths_at,
+        "saturated_command_steps": int(np.count_nonzero(np.any(
+            np.abs(traj.command) >= (1.0 - 1e-6) * traj.settings["max_reel_rate"], axis=1))),
+        "max_reel_accel_over_limit": (float(np.abs(traj.reel_accel).max() / limit)
+                                      if limit else None),
+        "chattering": chattering(traj.orbits, traj.command, start),
+    }
