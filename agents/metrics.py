@@ -6,8 +6,9 @@ An episode is recorded as the env's ``info`` dicts after every step. Definitions
 * ``tracking_rms`` [rad]: RMS of theta_i - theta_d over all tethers and the steps
   after the first orbit (NaN if the episode ended before it).
 * ``final_error`` [rad]: max |theta_i - theta_d| over the last orbit of the episode.
-* ``converge_orbits`` [orbits]: first nu after which max_i |theta_i - theta_d| stays
-  below 1e-3 rad to the end (NaN if never).
+* ``converge_orbits`` [orbits]: :func:`convergence_orbits` of max_i |theta_i - theta_d|:
+  the first sample of the final run of samples below 1e-3 rad (NaN if never or
+  after a failure).
 * ``reel_effort`` [-]: integral of sum_i |l_i'| d nu over the episode.
 * ``reel_excursion`` [-]: max over tethers of (max l_i - min l_i).
 * ``min_tension`` [-]: smallest T^_i at any physics substep boundary.
@@ -23,11 +24,27 @@ import math
 import numpy as np
 from scipy import stats
 
-__all__ = ["episode_metrics", "aggregate", "METRICS", "CONVERGENCE_TOL"]
+__all__ = ["episode_metrics", "aggregate", "convergence_orbits", "METRICS", "CONVERGENCE_TOL"]
 
 CONVERGENCE_TOL = 1e-3
+"""Tracking tolerance of the convergence time [rad]."""
 METRICS = ("tracking_rms", "final_error", "converge_orbits", "reel_effort", "reel_excursion",
            "min_tension", "slack", "tumble", "length", "success", "chattering", "return")
+
+
+def convergence_orbits(orbits: np.ndarray, error: np.ndarray,
+                       tol: float = CONVERGENCE_TOL) -> float | None:
+    """First time [orbits] after which ``error`` stays below ``tol``; None if never.
+
+    The time is that of the first sample of the final run of samples below ``tol``.
+    """
+    error = np.asarray(error, dtype=float)
+    above = np.nonzero(~(error < tol))[0]
+    if above.size == 0:
+        return float(orbits[0])
+    if above[-1] == error.shape[0] - 1:
+        return None
+    return float(orbits[above[-1] + 1])
 
 
 def episode_metrics(infos: list[dict], rewards: list[float], nu0: float, control_step: float,
@@ -45,19 +62,11 @@ def episode_metrics(infos: list[dict], rewards: list[float], nu0: float, control
     after = nu > orbit + 1e-9
     maxerr = np.abs(err).max(axis=1)
     last = nu > nu[-1] - orbit
-    above = np.nonzero(maxerr >= CONVERGENCE_TOL)[0]
-    if failure is not None:
-        converge = math.nan
-    elif above.size == 0:
-        converge = 0.0
-    elif above[-1] + 1 < len(nu):
-        converge = float(nu[above[-1]] / orbit)
-    else:
-        converge = math.nan
+    converge = None if failure is not None else convergence_orbits(nu / orbit, maxerr)
     return {
         "tracking_rms": float(np.sqrt(np.mean(err[after] ** 2))) if after.any() else math.nan,
         "final_error": float(maxerr[last].max()),
-        "converge_orbits": converge,
+        "converge_orbits": math.nan if converge is None else converge,
         "reel_effort": float(np.abs(dl).sum() * control_step),
         "reel_excursion": float((length.max(axis=0) - length.min(axis=0)).max()),
         "min_tension": float(tmin.min()),

@@ -6,29 +6,14 @@ import math
 
 import numpy as np
 
+from ..metrics import convergence_orbits
 from .runs import Trajectory
-from .settings import CONVERGENCE_TOL
 
 
 def swing(length: np.ndarray, length0: float) -> np.ndarray:
     """(max l - min l) / l(0) per tether over the samples given [-]."""
     length = np.asarray(length, dtype=float)
     return (length.max(axis=0) - length.min(axis=0)) / length0
-
-
-def convergence_orbits(orbits: np.ndarray, error: np.ndarray,
-                       tol: float = CONVERGENCE_TOL) -> float | None:
-    """First time [orbits] after which ``error`` stays below ``tol``; None if never.
-
-    The time is that of the first sample of the final run of samples below ``tol``.
-    """
-    error = np.asarray(error, dtype=float)
-    above = np.nonzero(~(error < tol))[0]
-    if above.size == 0:
-        return float(orbits[0])
-    if above[-1] == error.shape[0] - 1:
-        return None
-    return float(orbits[above[-1] + 1])
 
 
 def chattering(orbits: np.ndarray, command: np.ndarray, start: float,

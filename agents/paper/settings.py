@@ -5,8 +5,6 @@ from __future__ import annotations
 import math
 
 ORBIT = 2.0 * math.pi
-CONVERGENCE_TOL = 1e-3
-"""Tracking tolerance of the convergence time [rad]."""
 
 OPEN_LOOP_SETTINGS = {"control_step": 0.001, "physics_step": 0.001,
                       "reel_time_constant": 0.005, "accel_limit": None,
