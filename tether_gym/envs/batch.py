@@ -20,7 +20,7 @@ from ..tasks.reference import desired_libration, periodic_reel_rate
 from ..tasks.reward import COMPONENTS
 from ..tasks.termination import Failure
 from .config import EnvConfig
-from .step_kernel import info_batch, step_batch, step_rows, step_rows_parallel, write_obs
+from .step_kernel import info_batch, step_rows, step_rows_parallel, write_obs
 
 __all__ = ["ChainBatch", "RESET_OPTION_KEYS", "INFO_KEYS"]
 
@@ -93,6 +93,7 @@ class ChainBatch:
         self._n_substeps = config.n_substeps
         self._length_min, self._length_max = config.length_bounds
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
+        self._all_rows = np.arange(num, dtype=np.int64)
         self._theta_ref = np.zeros(num)
         self._dtheta_ref = np.zeros(num)
         self._reel_accel = np.zeros((num, n))
@@ -177,12 +178,8 @@ class ChainBatch:
                 self.with_params,
                 self.noise, self.obs, self.reward, self.components, self.failure,
                 self.tension_min, self.tension_end, self.deriv_end)
-        if rows is None and n_chunks <= 0:
-            step_batch(*tail)
-            self.steps += 1
-            return
         if rows is None:
-            rows = np.arange(self.num, dtype=np.int64)
+            rows = self._all_rows
         if n_chunks > 0:
             step_rows_parallel(rows, min(n_chunks, max(len(rows), 1)), *tail)
         else:

@@ -2,9 +2,9 @@
 
 Both :class:`~tether_gym.envs.TetherLibrationEnv` (a batch of one) and
 :class:`~tether_gym.envs.vector.TetherLibrationVectorEnv` step through
-:func:`_step_row` (:func:`step_batch` over all rows, :func:`step_rows` over some,
-:func:`step_rows_parallel` over some on numba's threads), so their trajectories are
-identical for the same inputs.
+:func:`_step_row` (:func:`step_rows` over the listed rows, :func:`step_rows_parallel`
+over them on numba's threads), so their trajectories are identical for the same
+inputs.
 
 Observation layout (float32), n = N-1 tethers:
 ``[sin nu, cos nu, theta (n), theta' (n), l (n), l' (n), theta_d, theta_d'``
@@ -22,7 +22,7 @@ from ..physics import kernels
 from ..tasks.reward import reward_terms
 from ..tasks.termination import failure_code
 
-__all__ = ["step_batch", "step_rows", "step_rows_parallel", "info_batch", "write_obs",
+__all__ = ["step_rows", "step_rows", "step_rows_parallel", "info_batch", "write_obs",
            "N_COMPONENTS"]
 
 N_COMPONENTS = 5
@@ -48,10 +48,12 @@ def write_obs(nu, y, amplitude, frequency, par, with_params, noise, out):
 
 
 @njit(cache=True)
-def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-               weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
-               obs, reward, components, failure, tension_min, tension_end, deriv_end):
-    """Advance every environment of the batch by one control step, in place.
+def step_rows(rows, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
+              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
+              obs, reward, components, failure, tension_min, tension_end, deriv_end):
+    """Advance the rows listed in ``rows`` (int64) by one control step, in place.
+
+    Rows not listed are left untouched.
 
     Parameters
     ----------
@@ -68,20 +70,6 @@ def step_batch(nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, fre
     A row whose state turns non-finite keeps its previous state (so nothing non-finite
     reaches the observation) and gets failure code 1 and reward 0 (the lowest).
     """
-    batch, m = y.shape
-    work = _row_work(m // 4)
-    for b in range(batch):
-        _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-                  weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
-                  obs, reward,
-                  components, failure, tension_min, tension_end, deriv_end, work)
-
-
-@njit(cache=True)
-def step_rows(rows, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
-              obs, reward, components, failure, tension_min, tension_end, deriv_end):
-    """:func:`step_batch` restricted to the row indices ``rows`` (int64); others untouched."""
     work = _row_work(y.shape[1] // 4)
     for i in range(rows.shape[0]):
         _step_row(rows[i], nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude,
