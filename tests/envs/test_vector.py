@@ -312,6 +312,14 @@ def test_returned_arrays_are_not_reused():
     obs2, rew, *_, info2 = env.step(np.zeros((2, 2)))
     assert np.array_equal(obs, obs_copy) and np.array_equal(info["theta"], theta)
     assert obs2 is not obs and info2["theta"] is not info["theta"]
+    # the entries (and the "_key" masks) are separate arrays, even where they share
+    # one buffer: writing one changes no other
+    info2["theta"][:] = 7.0
+    info2["_theta"][:] = False
+    assert not np.any(info2["dtheta"] == 7.0) and not np.any(info2["length"] == 7.0)
+    assert info2["_dtheta"].all() and info2["_nu"].all()
+    _, _, _, _, info3 = env.step(np.zeros((2, 2)))
+    assert not np.any(info3["theta"] == 7.0) and info3["_theta"].all()
 
 
 def test_threaded_kernel_gives_the_serial_results():

@@ -15,12 +15,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics import kernels
 from ..tasks.reference import desired_libration, periodic_reel_rate
 from ..tasks.reward import COMPONENTS
 from ..tasks.termination import Failure
 from .config import EnvConfig
-from .step_kernel import info_batch, step_rows, step_rows_parallel, write_obs
+from .step_kernel import (
+    INFO_SCALARS,
+    INFO_VECTORS,
+    make_row_work,
+    start_rows,
+    step_rows,
+    step_rows_parallel,
+)
 
 __all__ = ["ChainBatch", "RESET_OPTION_KEYS", "INFO_KEYS"]
 
@@ -30,7 +36,11 @@ INFO_KEYS = ("nu", "theta", "dtheta", "length", "dlength", "ddlength", "tension"
              "theta_ref", "dtheta_ref", "reel_accel", "eccentricity", "failure") + COMPONENTS
 """Keys of the ``info`` dict, in order."""
 
-_FAILURE_LABELS = tuple(Failure(code).label for code in range(len(Failure)))
+_FAILURE_LABELS = np.empty(len(Failure), dtype=object)
+_FAILURE_LABELS[:] = [Failure(code).label for code in range(len(Failure))]
+
+_SCALAR_KEYS = INFO_SCALARS + COMPONENTS
+"""Keys of the rows of ChainBatch.info_s (INFO_VECTORS name those of info_v)."""
 
 
 def _check_options(options, n):
@@ -94,67 +104,67 @@ class ChainBatch:
         self._length_min, self._length_max = config.length_bounds
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
         self._all_rows = np.arange(num, dtype=np.int64)
-        self._theta_ref = np.zeros(num)
-        self._dtheta_ref = np.zeros(num)
-        self._reel_accel = np.zeros((num, n))
+        # info entries of every row, kept up to date by the kernels (see _info_values)
+        self.info_s = np.zeros((len(INFO_SCALARS) + len(COMPONENTS), num))
+        self.info_v = np.zeros((len(INFO_VECTORS), num, n))
+        self._work = make_row_work(n, 1)  # scratch of the kernels, one lane per thread chunk
+        self._lanes = 1
 
     # ------------------------------------------------------------------ #
-    def reset_row(self, b: int, rng: np.random.Generator, options=None) -> None:
-        """Draw row b's parameters and initial state (options override the draw)."""
+    def reset_rows(self, rows, rngs, options=None) -> None:
+        """Draw the listed rows' parameters and initial states (options override the draw).
+
+        ``rows`` is a sequence of row indices and ``rngs[b]`` row b's generator. Each
+        row draws from its own generator in the single env's order (e, the masses,
+        then theta, theta', l as one draw of 3n uniforms, then the observation noise);
+        everything after the draws is computed for all the rows at once.
+        """
         cfg = self.config
         n = self.n
         opts = _check_options(options, n)
-        ecc = cfg.eccentricity
-        if cfg.randomised:
-            masses = np.asarray(cfg.masses)
+        rows = np.asarray(rows, dtype=np.int64)
+        count = rows.shape[0]
+        ecc = np.full(count, cfg.eccentricity)
+        scale = np.ones((count, n)) if cfg.mass_range is not None else None
+        unit = np.empty((count, 3 * n))
+        for i, b in enumerate(rows.tolist()):
+            rng = rngs[b]
             if cfg.eccentricity_range is not None:
-                ecc = float(rng.uniform(*cfg.eccentricity_range))
-            if cfg.mass_range is not None:
-                masses = masses * rng.uniform(1.0 - cfg.mass_range, 1.0 + cfg.mass_range, n)
-            self.par[b] = cfg.param_row(ecc, masses)
+                ecc[i] = rng.uniform(*cfg.eccentricity_range)
+            if scale is not None:
+                scale[i] = rng.uniform(1.0 - cfg.mass_range, 1.0 + cfg.mass_range, n)
+            unit[i] = rng.uniform(-1.0, 1.0, 3 * n)
+            if cfg.obs_noise > 0.0:
+                self.noise[b] = rng.normal(0.0, cfg.obs_noise, 4 * n)
+        if cfg.randomised:
+            masses = np.asarray(cfg.masses, dtype=float)
+            self.par[rows] = cfg.param_rows(ecc, masses if scale is None else masses * scale)
         else:  # the nominal row, built once in __init__
-            self.par[b] = self._par_nominal
+            self.par[rows] = self._par_nominal
         nu0 = float(opts.get("nu", cfg.initial_nu))
         ref, dref, _ = desired_libration(nu0, cfg.amplitude, cfg.frequency)
-        theta = np.asarray(cfg.initial_theta) + rng.uniform(-1, 1, n) * cfg.init_theta_range
-        dtheta = dref + rng.uniform(-1, 1, n) * cfg.init_dtheta_range
-        length = np.asarray(cfg.initial_lengths) + rng.uniform(-1, 1, n) * cfg.init_length_range
-        theta = opts.get("theta", theta)
-        dtheta = opts.get("dtheta", dtheta)
-        length = opts.get("length", length)
+        shape = (count, n)
+        theta = (np.broadcast_to(opts["theta"], shape) if "theta" in opts else
+                 np.asarray(cfg.initial_theta) + unit[:, :n] * cfg.init_theta_range)
+        dtheta = (np.broadcast_to(opts["dtheta"], shape) if "dtheta" in opts else
+                  dref + unit[:, n:2 * n] * cfg.init_dtheta_range)
+        length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
+                  np.asarray(cfg.initial_lengths) + unit[:, 2 * n:] * cfg.init_length_range)
         # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference.
-        dlength = opts.get("dlength", periodic_reel_rate(nu0, ref, dref, length, ecc,
-                                                         cfg.amplitude, cfg.frequency))
-        self.nu[b] = nu0
-        self.nu_end[b] = nu0 + cfg.episode_length
-        self.y[b] = np.concatenate([theta, dtheta, length, dlength])
-        self.steps[b] = 0
-        self.failure[b] = 0
-        self.reward[b] = 0.0
-        self.components[b] = 0.0
-        self._static_tension(b)
-        self._draw_noise(b, rng)
-        write_obs(self.nu[b], self.y[b], cfg.amplitude, cfg.frequency, self.par[b],
-                  self.with_params, self.noise[b], self.obs[b])
-
-    def _static_tension(self, b: int) -> None:
-        """Tension and derivatives at row b's state with the reels holding their rate."""
-        n = self.n
-        nu = self.nu[b:b + 1]
-        y = self.y[b]
-        dl = y[3 * n:].reshape(1, n)
-        ddl = np.empty((1, n))
-        kernels.reel_batch(nu, dl, dl, self.par[b:b + 1], ddl)
-        ddth = np.empty((1, n))
-        kernels.accel_batch(nu, y[:n].reshape(1, n), y[n:2 * n].reshape(1, n),
-                            y[2 * n:3 * n].reshape(1, n), dl, ddl, self.par[b:b + 1], ddth,
-                            self.tension_end[b:b + 1])
-        self.tension_min[b] = self.tension_end[b]
-        self.deriv_end[b] = np.concatenate([y[n:2 * n], ddth[0], y[3 * n:], ddl[0]])
-
-    def _draw_noise(self, b: int, rng: np.random.Generator) -> None:
-        if self.config.obs_noise > 0.0:
-            self.noise[b] = rng.normal(0.0, self.config.obs_noise, 4 * self.n)
+        dlength = (np.broadcast_to(opts["dlength"], shape) if "dlength" in opts else
+                   periodic_reel_rate(nu0, ref, dref, length, ecc[:, None], cfg.amplitude,
+                                      cfg.frequency))
+        self.nu[rows] = nu0
+        self.nu_end[rows] = nu0 + cfg.episode_length
+        self.y[rows] = np.concatenate([theta, dtheta, length, dlength], axis=1)
+        self.steps[rows] = 0
+        self.failure[rows] = 0
+        self.reward[rows] = 0.0
+        self.components[rows] = 0.0
+        start_rows(rows, self.nu, self.y, self.par, cfg.amplitude, cfg.frequency,
+                   self.with_params, self.noise, self.obs, self.components, self.tension_min,
+                   self.tension_end, self.deriv_end, self._accel_scale, self.info_s,
+                   self.info_v, self._work)
 
     # ------------------------------------------------------------------ #
     def step(self, action: np.ndarray, rngs, rows: np.ndarray | None = None,
@@ -168,22 +178,28 @@ class ChainBatch:
         """
         cfg = self.config
         if self._random_step:
-            for b in (range(self.num) if rows is None else rows):
+            for b in (range(self.num) if rows is None else rows.tolist()):
                 if cfg.disturbance > 0.0:
                     self.dist[b] = rngs[b].uniform(-cfg.disturbance, cfg.disturbance, self.n)
-                self._draw_noise(b, rngs[b])
+                if cfg.obs_noise > 0.0:
+                    self.noise[b] = rngs[b].normal(0.0, cfg.obs_noise, 4 * self.n)
         tail = (self.nu, self.y, action, cfg.max_reel_rate, self.dist, self.par,
                 cfg.physics_step, self._n_substeps, cfg.amplitude, cfg.frequency, self.weights,
                 self._length_min, self._length_max, self._accel_reference, self._length_nominal,
                 self.with_params,
                 self.noise, self.obs, self.reward, self.components, self.failure,
-                self.tension_min, self.tension_end, self.deriv_end)
+                self.tension_min, self.tension_end, self.deriv_end, self._accel_scale,
+                self.info_s, self.info_v)
         if rows is None:
             rows = self._all_rows
         if n_chunks > 0:
-            step_rows_parallel(rows, min(n_chunks, max(len(rows), 1)), *tail)
+            n_chunks = min(n_chunks, max(len(rows), 1))
+            if n_chunks > self._lanes:
+                self._work = make_row_work(self.n, n_chunks)
+                self._lanes = n_chunks
+            step_rows_parallel(rows, n_chunks, *tail, self._work)
         else:
-            step_rows(rows, *tail)
+            step_rows(rows, *tail, self._work)
         self.steps[rows] += 1
 
     def truncated(self) -> np.ndarray:
@@ -191,69 +207,22 @@ class ChainBatch:
         return self.nu >= self.nu_end - 1e-9
 
     # ------------------------------------------------------------------ #
-    def _derived(self, lo: int, hi: int) -> None:
-        """Refresh theta_ref, dtheta_ref and reel_accel of rows lo..hi-1."""
-        cfg = self.config
-        if lo == 0 and hi == self.num:
-            info_batch(self.nu, self.y, self.par, self.deriv_end, cfg.amplitude, cfg.frequency,
-                       self._accel_scale, self._theta_ref, self._dtheta_ref, self._reel_accel)
-        else:
-            info_batch(self.nu[lo:hi], self.y[lo:hi], self.par[lo:hi], self.deriv_end[lo:hi],
-                       cfg.amplitude, cfg.frequency, self._accel_scale,
-                       self._theta_ref[lo:hi], self._dtheta_ref[lo:hi], self._reel_accel[lo:hi])
-
     def info(self, b: int) -> dict:
-        """The documented ``info`` dict of row b (fresh arrays)."""
-        n = self.n
-        self._derived(b, b + 1)
-        y = self.y[b].copy()
-        comp = self.components[b].tolist()
-        info = {
-            "nu": float(self.nu[b]),
-            "theta": y[:n],
-            "dtheta": y[n:2 * n],
-            "length": y[2 * n:3 * n],
-            "dlength": y[3 * n:],
-            "ddlength": self.deriv_end[b, 3 * n:].copy(),
-            "tension": self.tension_end[b].copy(),
-            "tension_min": self.tension_min[b].copy(),
-            "theta_ref": float(self._theta_ref[b]),
-            "dtheta_ref": float(self._dtheta_ref[b]),
-            "reel_accel": self._reel_accel[b].copy(),
-            "eccentricity": float(self.par[b, kernels.P_ECC]),
-            "failure": _FAILURE_LABELS[self.failure[b]],
-        }
-        for name, value in zip(COMPONENTS, comp, strict=True):
-            info[name] = value
-        return info
+        """The documented ``info`` dict of row b (floats and fresh (n,) arrays)."""
+        scalars = dict(zip(_SCALAR_KEYS, self.info_s[:, b].tolist(), strict=True))
+        vectors = dict(zip(INFO_VECTORS, self.info_v[:, b].copy(), strict=True))
+        scalars["failure"] = _FAILURE_LABELS[self.failure[b]]
+        return {key: scalars[key] if key in scalars else vectors[key] for key in INFO_KEYS}
 
     def info_arrays(self) -> dict:
         """Every row's :meth:`info` stacked: a dict of fresh (num, ...) arrays.
 
         Floats become float64 arrays of shape (num,), arrays (num, n), and
         ``"failure"`` an object array of None / labels: the layout of gymnasium's
-        vector-env infos (without the ``_key`` masks).
+        vector-env infos (without the ``_key`` masks). The entries are views of two
+        fresh copies of the info buffers that the kernels keep up to date.
         """
-        n = self.n
-        self._derived(0, self.num)
-        y = self.y
-        labels = np.empty(self.num, dtype=object)
-        labels[:] = [_FAILURE_LABELS[code] for code in self.failure.tolist()]
-        info = {
-            "nu": self.nu.copy(),
-            "theta": y[:, :n].copy(),
-            "dtheta": y[:, n:2 * n].copy(),
-            "length": y[:, 2 * n:3 * n].copy(),
-            "dlength": y[:, 3 * n:].copy(),
-            "ddlength": self.deriv_end[:, 3 * n:].copy(),
-            "tension": self.tension_end.copy(),
-            "tension_min": self.tension_min.copy(),
-            "theta_ref": self._theta_ref.copy(),
-            "dtheta_ref": self._dtheta_ref.copy(),
-            "reel_accel": self._reel_accel.copy(),
-            "eccentricity": self.par[:, kernels.P_ECC].copy(),
-            "failure": labels,
-        }
-        for i, name in enumerate(COMPONENTS):
-            info[name] = self.components[:, i].copy()
-        return info
+        scalars = dict(zip(_SCALAR_KEYS, self.info_s.copy(), strict=True))
+        vectors = dict(zip(INFO_VECTORS, self.info_v.copy(), strict=True))
+        scalars["failure"] = _FAILURE_LABELS[self.failure]
+        return {key: scalars[key] if key in scalars else vectors[key] for key in INFO_KEYS}

@@ -236,17 +236,34 @@ class EnvConfig:
 
     def param_row(self, eccentricity: float, masses) -> np.ndarray:
         """Kernel parameter row for given e and subsatellite masses."""
+        return self.param_rows(np.array([eccentricity], dtype=float),
+                               np.asarray(masses, dtype=float)[None, :])[0]
+
+    def param_rows(self, eccentricity: np.ndarray, masses: np.ndarray) -> np.ndarray:
+        """Kernel parameter rows (B, 6+n) for e of shape (B,) and masses of shape (B, n).
+
+        The layout is :func:`tether_gym.physics.kernels.pack_params`'s, with the tail
+        mass fractions Mt_j = sum_{i>=j} M_i / sum_i M_i of each row; masses of shape
+        (n,) are shared by every row.
+        """
+        eccentricity = np.asarray(eccentricity, dtype=float)
         m = np.asarray(masses, dtype=float)
-        frac = m / m.sum()
-        tail = np.cumsum(frac[::-1])[::-1]
+        m = np.broadcast_to(m, eccentricity.shape + m.shape[-1:])
+        frac = m / m.sum(axis=-1, keepdims=True)
+        tail = np.cumsum(frac[:, ::-1], axis=-1)[:, ::-1]
         grav = (kernels.GRAVITY_FULL if self.gravity == Gravity.FULL.value
                 else kernels.GRAVITY_GRADIENT)
         a_bound = math.inf if self.accel_limit is None else self.accel_limit / self.accel_scale
         v_bound = (math.inf if self.speed_limit is None
                    else self.speed_limit / (self.total_tether_length * self.rate_scale))
-        return kernels.pack_params(eccentricity, tail, grav,
+        head = kernels.pack_params(0.0, (), grav,
                                    self.total_tether_length / self.semi_latus_rectum,
                                    a_bound, v_bound, self.reel_time_constant)
+        rows = np.empty((m.shape[0], kernels.P_TAIL + m.shape[1]))
+        rows[:, :kernels.P_TAIL] = head
+        rows[:, kernels.P_ECC] = eccentricity
+        rows[:, kernels.P_TAIL:] = tail
+        return rows
 
     @property
     def accel_reference(self) -> float:

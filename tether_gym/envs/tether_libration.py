@@ -199,7 +199,7 @@ class TetherLibrationEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self._rngs[0] = self.np_random
-        self._batch.reset_row(0, self.np_random, options)
+        self._batch.reset_rows((0,), (self.np_random,), options)
         self._needs_reset = False
         if self.render_mode == "human":
             self.render()

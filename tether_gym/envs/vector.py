@@ -218,7 +218,8 @@ class TetherLibrationVectorEnv(VectorEnv):
         for i in rows.tolist():
             if seeds[i] is not None:
                 self._rngs[i], self._seeds[i] = seeding.np_random(seeds[i])
-            batch.reset_row(i, self._rng(i), options or None)
+            self._rng(i)
+        batch.reset_rows(rows, self._rngs, options or None)
         self._autoreset[rows] = False
         self._was_reset[rows] = True
         return batch.obs.copy(), self._infos(mask)
@@ -240,12 +241,10 @@ class TetherLibrationVectorEnv(VectorEnv):
                              f"not: {a[bad]!r}")
         done = self._autoreset
         if done.any():
-            reset_rows = np.flatnonzero(done).tolist()
             rows = np.flatnonzero(~done)
             if len(rows):
                 batch.step(a, self._rngs, rows, self._n_chunks(len(rows)))
-            for i in reset_rows:
-                batch.reset_row(i, self._rngs[i])
+            batch.reset_rows(np.flatnonzero(done), self._rngs)
         else:
             chunks = self._n_chunks(self.num_envs)
             batch.step(a, self._rngs, None if chunks == 0 else self._all_rows, chunks)
@@ -262,10 +261,11 @@ class TetherLibrationVectorEnv(VectorEnv):
         values = self._batch.info_arrays()
         infos: dict[str, Any] = {}
         if mask is None:
-            every = np.ones(self.num_envs, dtype=np.bool_)
-            for key, value in values.items():
+            # one buffer for all the "_key" masks: each key still gets its own array
+            every = np.ones((len(values), self.num_envs), dtype=np.bool_)
+            for i, (key, value) in enumerate(values.items()):
                 infos[key] = value
-                infos["_" + key] = every.copy()
+                infos["_" + key] = every[i]
             return infos
         for key, value in values.items():
             if value.dtype == object:

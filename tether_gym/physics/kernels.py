@@ -55,10 +55,14 @@ import numpy as np
 from numba import njit
 
 from .integrators import make_rk4
+from .jit import INLINE, KERNEL, LOOP
 
 P_ECC, P_GRAV, P_EPS, P_ABOUND, P_VBOUND, P_TAU, P_TAIL = range(7)
 GRAVITY_GRADIENT = 0
 GRAVITY_FULL = 1
+LANE_STRIDE = 8
+"""Lane c of the scratch arrays is slot c * LANE_STRIDE: with the slots between left
+unused, two threads never write to the same 64-byte cache line (no false sharing)."""
 
 
 def pack_params(eccentricity, tail_masses, gravity=GRAVITY_GRADIENT, length_ratio=0.0,
@@ -74,8 +78,10 @@ def pack_params(eccentricity, tail_masses, gravity=GRAVITY_GRADIENT, length_rati
 # --------------------------------------------------------------------------- #
 # Hot helpers are inlined (inline="always") and index one state row
 # y = [theta, theta', l, l'] with offsets instead of slicing it: a call or a view
-# passes arrays as reference-counted structs, which cost more than the arithmetic.
-@njit(cache=True, inline="always", error_model="numpy")
+# passes arrays as structs, which cost more than the arithmetic of a short chain (and,
+# with numba's reference counting, atomic operations: the loops that inline them are
+# compiled without it, see jit.py).
+@njit(**INLINE)
 def _links(nu, y, n, par, V):
     """Link trigonometry and the projected tail gravity; returns (q, sin nu, k).
 
@@ -120,7 +126,7 @@ def _links(nu, y, n, par, V):
     return q, sn, k
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _coefficients(j, kk, y, n, par, V, q):
     """Entries (j, k) of the theta-equations: (diag(l) A, P, Q, b0 term) (module doc)."""
     mt = par[P_TAIL + max(j, kk)]
@@ -134,7 +140,7 @@ def _coefficients(j, kk, y, n, par, V, q):
             -mt * lk * wk * (wk * s + q * c))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _solve_spd(S, R):
     """R <- S^-1 R for symmetric positive definite S (destroyed), R of shape (n, m)."""
     n = S.shape[0]
@@ -156,7 +162,7 @@ def _solve_spd(S, R):
             R[p, c] = acc / S[p, p]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _theta_ddot(y, n, ddl, ddl_off, par, S, R, V, q, out, out_off):
     """theta'' into out[out_off:] from V (after :func:`_links`); l'' = ddl[ddl_off:]."""
     for j in range(n):
@@ -171,7 +177,7 @@ def _theta_ddot(y, n, ddl, ddl_off, par, S, R, V, q, out, out_off):
         out[out_off + j] = R[j, 0]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _tension(y, n, ddl, ddl_off, ddth, ddth_off, par, V, q, tension):
     """T^ from the e_j components of (*) (module docstring)."""
     for j in range(n):
@@ -189,7 +195,7 @@ def _tension(y, n, ddl, ddl_off, ddth, ddth_off, par, V, q, tension):
         tension[j] = acc
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**LOOP)
 def _accel(nu, y, ddlength, par, S, R, V, ddtheta, tension):
     """theta'' and T^ for one state row y and its l''; R is (n, 1) scratch."""
     n = ddlength.shape[0]
@@ -198,7 +204,7 @@ def _accel(nu, y, ddlength, par, S, R, V, ddtheta, tension):
     _tension(y, n, ddlength, 0, ddtheta, 0, par, V, q, tension)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**LOOP)
 def _assemble(nu, y, n, par, S, rhs, P, Q, V):
     """Fill the affine theta-equations (rows scaled by l_j) for one state row y.
 
@@ -219,7 +225,7 @@ def _assemble(nu, y, n, par, S, rhs, P, Q, V):
 # --------------------------------------------------------------------------- #
 # reel actuator
 # --------------------------------------------------------------------------- #
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _reel(k, sn, dlength, command, ecc, a_bound, v_bound, tau):
     """:func:`reel_ddlength` with k = 1 + e cos(nu) and sin(nu) given."""
     k2 = k * k
@@ -234,7 +240,7 @@ def _reel(k, sn, dlength, command, ecc, a_bound, v_bound, tau):
     return (a + coriolis) / k4
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**LOOP)
 def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
     """Actual l'' [-] of one reel given its rate l' and the commanded rate l'_cmd.
 
@@ -247,7 +253,7 @@ def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
                  v_bound, tau)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def _controlled(nu, y, args, dy, with_tension):
     cmd, dist, par, S, R, V, tension = args
     n = cmd.shape[0]
@@ -265,7 +271,7 @@ def _controlled(nu, y, args, dy, with_tension):
         dy[n + j] += dist[j]
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def controlled_rhs(nu, y, args, dy):
     """dy/dnu of the chain with its reels.
 
@@ -276,7 +282,7 @@ def controlled_rhs(nu, y, args, dy):
     _controlled(nu, y, args, dy, False)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def controlled_rhs_tension(nu, y, args, dy):
     """:func:`controlled_rhs` that also writes the tension T^ at (nu, y) into ``args[6]``.
 
@@ -289,15 +295,29 @@ def controlled_rhs_tension(nu, y, args, dy):
 rk4_step = make_rk4(controlled_rhs)
 
 
-@njit(cache=True, error_model="numpy")
-def make_scratch(n):
-    """Work arrays for :func:`advance_one` with n tethers."""
+@njit(**KERNEL)
+def make_scratch(n, lanes):
+    """Work arrays for :func:`advance_one` with n tethers, one set per lane.
+
+    Each lane (a thread's chunk of rows, or lane 0 for a serial loop) gets its own
+    slice of every array; :func:`scratch_lane` returns lane c's set in the layout
+    :func:`advance_one` takes.
+    """
     m = 4 * n
-    return (np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(n), np.empty(m),
-            (np.empty(m), np.empty(m), np.empty(m), np.empty(m)), np.empty(m))
+    slots = lanes * LANE_STRIDE
+    return (np.empty((slots, n, n)), np.empty((slots, n, 1)), np.empty((slots, 9, n)),
+            np.empty((slots, n)), np.empty((slots, 6, m)))
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
+def scratch_lane(scratch, c):
+    """Lane c of :func:`make_scratch`: (S, R, V, tension, k1, (k2, k3, k4, tmp), ybuf)."""
+    S, R, V, tens, K = scratch
+    i = c * LANE_STRIDE
+    return (S[i], R[i], V[i], tens[i], K[i, 0], (K[i, 1], K[i, 2], K[i, 3], K[i, 4]), K[i, 5])
+
+
+@njit(**INLINE)
 def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end, tension_end):
     """Advance one state (nu, y) by ``n_sub`` RK4 steps of size ``h`` [rad]; y in place.
 
@@ -311,41 +331,50 @@ def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end
     t = nu
     for j in range(n):
         tension_min[j] = math.inf
-    for i in range(n_sub):
-        controlled_rhs_tension(t, y, args, k1)
+    # n_sub + 1 evaluations with the tension: at the start of each substep (its k1)
+    # and at the end (deriv_end); one loop, so the inlined right-hand side appears once
+    for i in range(n_sub + 1):
+        dy = k1 if i < n_sub else deriv_end
+        controlled_rhs_tension(t, y, args, dy)
         for j in range(n):
             tension_min[j] = min(tension_min[j], tens[j])
+        if i == n_sub:
+            break
         rk4_step(t, y, h, args, k1, work, ybuf)
         for j in range(4 * n):
             y[j] = ybuf[j]
         t = nu + (i + 1) * h
-    controlled_rhs_tension(t, y, args, deriv_end)
     for j in range(n):
         tension_end[j] = tens[j]
-        tension_min[j] = min(tension_min[j], tens[j])
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**KERNEL)
 def advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end):
     """Batched :func:`advance_one`: every row of (nu (B,), y (B, 4n)) in place.
 
     ``cmd`` and ``dist`` are (B, n); ``par`` is (B, 6+n) or (1, 6+n) (shared);
     outputs are (B, n), (B, 4n), (B, n).
     """
-    batch, m = y.shape
-    scratch = make_scratch(m // 4)
+    _advance_rows(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end,
+                  make_scratch(y.shape[1] // 4, 1))
+
+
+@njit(**LOOP)
+def _advance_rows(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end,
+                  scratch):
+    lane = scratch_lane(scratch, 0)
     shared = par.shape[0] == 1
-    for b in range(batch):
+    for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
-        nu[b] = advance_one(nu[b], y[b], cmd[b], dist[b], pb, h, n_sub, scratch,
+        nu[b] = advance_one(nu[b], y[b], cmd[b], dist[b], pb, h, n_sub, lane,
                             tension_min[b], deriv_end[b], tension_end[b])
 
 
 # --------------------------------------------------------------------------- #
 # batched evaluations behind TetherChain
 # --------------------------------------------------------------------------- #
-@njit(cache=True, error_model="numpy")
+@njit(**INLINE)
 def _pack_row(theta, dtheta, length, dlength, n, row):
     for j in range(n):
         row[j] = theta[j]
@@ -354,33 +383,39 @@ def _pack_row(theta, dtheta, length, dlength, n, row):
         row[3 * n + j] = dlength[j]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**KERNEL)
 def accel_batch(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension):
     """theta'' and T^ for a batch of states (arrays of shape (B,) and (B, n))."""
-    batch, n = theta.shape
-    S = np.empty((n, n))
-    R = np.empty((n, 1))
-    V = np.empty((9, n))
-    row = np.empty(4 * n)
+    n = theta.shape[1]
+    _accel_rows(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension,
+                np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(4 * n))
+
+
+@njit(**LOOP)
+def _accel_rows(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension,
+                S, R, V, row):
+    n = theta.shape[1]
     shared = par.shape[0] == 1
-    for b in range(batch):
+    for b in range(theta.shape[0]):
         pb = par[0] if shared else par[b]
         _pack_row(theta[b], dtheta[b], length[b], dlength[b], n, row)
         _accel(nu[b], row, ddlength[b], pb, S, R, V, ddtheta[b], tension[b])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**KERNEL)
 def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
     """(f, B, D) of theta'' = f + B l' + D l'' for a batch of states."""
-    batch, n = theta.shape
-    S = np.empty((n, n))
-    R = np.empty((n, 1 + 2 * n))
-    P = np.empty((n, n))
-    Q = np.empty((n, n))
-    V = np.empty((9, n))
-    row = np.zeros(4 * n)
+    n = theta.shape[1]
+    _affine_rows(nu, theta, dtheta, length, par, f, Bmat, Dmat, np.empty((n, n)),
+                 np.empty((n, 1 + 2 * n)), np.empty((n, n)), np.empty((n, n)),
+                 np.empty((9, n)), np.zeros(4 * n))
+
+
+@njit(**LOOP)
+def _affine_rows(nu, theta, dtheta, length, par, f, Bmat, Dmat, S, R, P, Q, V, row):
+    n = theta.shape[1]
     shared = par.shape[0] == 1
-    for b in range(batch):
+    for b in range(theta.shape[0]):
         pb = par[0] if shared else par[b]
         _pack_row(theta[b], dtheta[b], length[b], row[3 * n:], n, row)
         _assemble(nu[b], row, n, pb, S, R[:, 0:1], P, Q, V)
@@ -397,7 +432,7 @@ def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
                 Dmat[b, j, kk] = R[j, 1 + n + kk]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(**LOOP)
 def reel_batch(nu, dlength, command, par, out):
     """Vectorised :func:`reel_ddlength` over a batch (B,), (B, n)."""
     batch, n = dlength.shape

@@ -103,7 +103,7 @@ class RewardWeights:
                 self.safe_tension, self.length, self.length_scale)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def reward_terms(theta, dtheta, length, theta_ref, dtheta_ref, action, accel_ratio,
                  tension_min, length_nominal, weights, out):
     """Fill ``out[0:5]`` with the components of :data:`COMPONENTS`; return their sum.

@@ -35,7 +35,7 @@ class Failure(IntEnum):
         return None if self is Failure.NONE else str(self)
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always", error_model="numpy")
 def failure_code(y, tension_min, length_min, length_max):
     """Failure code of one state row y = [theta, theta', l, l'] (checked in this order).
 
