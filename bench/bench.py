@@ -226,6 +226,8 @@ def main(argv=None) -> int:
         vec_runners[(num, "auto")] = vector_runner(num, max(3, budget // num))
     for num in (256, 1024):
         vec_runners[(num, False)] = vector_runner(num, max(3, budget // num), parallel=False)
+    vec_runners[(256, "noisy")] = vector_runner(256, max(3, budget // 256),
+                                                disturbance=0.1, obs_noise=1e-3)
     vec_runners[(16, "sync")] = vector_runner(16, max(3, budget // 16 // 4), mode="sync")
     vec_rates = best_rates(vec_runners, max(2, rounds - 2))
     for (num, parallel), rate in vec_rates.items():
@@ -236,6 +238,7 @@ def main(argv=None) -> int:
             ok = check(ratio)
         what = {"auto": f"vector env, {num} envs (default: threads from 128 envs)",
                 False: f"vector env, {num} envs (parallel=False, 1 thread)",
+                "noisy": f"vector env, {num} envs, disturbance 0.1 + obs noise 1e-3",
                 "sync": f"for reference: gymnasium SyncVectorEnv, {num} single envs"}[parallel]
         rows.append(row(what, f"{rate:,.0f} env-steps/s", f"{ratio:.2f}x Pendulum",
                         text or "", ok))

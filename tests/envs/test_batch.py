@@ -63,3 +63,27 @@ def test_param_rows_pack_independent_tail_fractions():
     shared = config.param_rows(ecc, masses[0])
     assert np.array_equal(shared, np.tile(config.param_row(0.0, masses[0]), (7, 1))
                           + np.eye(1, shared.shape[1], kernels.P_ECC) * ecc[:, None])
+
+
+@pytest.mark.parametrize("rows", [None, [4, 1]])
+def test_step_draws_are_each_rows_uniform_then_normal(rows):
+    """Per step, row b's disturbance and noise are rngs[b].uniform(-d, d, n) and then
+    rngs[b].normal(0, sigma, 4n), from copies of the generators taken before the step."""
+    config = EnvConfig.from_kwargs(n_bodies=4, disturbance=0.1, obs_noise=1e-3)
+    batch = ChainBatch(config, 6)
+    rngs = [np.random.default_rng(7 + b) for b in range(6)]
+    batch.reset_rows(range(6), rngs)
+    before_dist, before_noise = batch.dist.copy(), batch.noise.copy()
+    copies = [np.random.Generator(np.random.PCG64()) for _ in range(6)]
+    for copy, rng in zip(copies, rngs, strict=True):
+        copy.bit_generator.state = rng.bit_generator.state
+    batch.step(np.zeros((6, 3)), rngs, None if rows is None else np.array(rows))
+    stepped = range(6) if rows is None else rows
+    for b in range(6):
+        if b in stepped:
+            assert np.array_equal(batch.dist[b], copies[b].uniform(-0.1, 0.1, 3))
+            assert np.array_equal(batch.noise[b], copies[b].normal(0.0, 1e-3, 12))
+            assert copies[b].random() == rngs[b].random()
+        else:  # rows not stepped draw nothing
+            assert np.array_equal(batch.dist[b], before_dist[b])
+            assert np.array_equal(batch.noise[b], before_noise[b])

@@ -103,6 +103,12 @@ class ChainBatch:
         self._n_substeps = config.n_substeps
         self._length_min, self._length_max = config.length_bounds
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
+        # standard uniform / normal variates of each step, and their rows as views
+        # (built once: rng.random(out=...) then costs no view per draw)
+        self._unit = np.zeros((num, n))
+        self._gauss = np.zeros((num, 4 * n))
+        self._unit_rows = list(self._unit)
+        self._gauss_rows = list(self._gauss)
         self._all_rows = np.arange(num, dtype=np.int64)
         # info entries of every row, kept up to date by the kernels (see _info_values)
         self.info_s = np.zeros((len(INFO_SCALARS) + len(COMPONENTS), num))
@@ -178,11 +184,7 @@ class ChainBatch:
         """
         cfg = self.config
         if self._random_step:
-            for b in (range(self.num) if rows is None else rows.tolist()):
-                if cfg.disturbance > 0.0:
-                    self.dist[b] = rngs[b].uniform(-cfg.disturbance, cfg.disturbance, self.n)
-                if cfg.obs_noise > 0.0:
-                    self.noise[b] = rngs[b].normal(0.0, cfg.obs_noise, 4 * self.n)
+            self._draw_step_noise(rngs, rows)
         tail = (self.nu, self.y, action, cfg.max_reel_rate, self.dist, self.par,
                 cfg.physics_step, self._n_substeps, cfg.amplitude, cfg.frequency, self.weights,
                 self._length_min, self._length_max, self._accel_reference, self._length_nominal,
@@ -201,6 +203,28 @@ class ChainBatch:
         else:
             step_rows(rows, *tail, self._work)
         self.steps[rows] += 1
+
+    def _draw_step_noise(self, rngs, rows) -> None:
+        """This step's disturbance and observation noise of every row (or of ``rows``).
+
+        Row b draws from ``rngs[b]`` exactly what ``uniform(-d, d, n)`` and then
+        ``normal(0, sigma, 4n)`` draw: the standard variates go straight into
+        preallocated rows (``out=``), and the scaling, numpy's own
+        ``low + (high - low) u`` and ``0 + sigma z``, is done for all rows at once.
+        """
+        cfg = self.config
+        d, sigma = cfg.disturbance, cfg.obs_noise
+        for b in (range(self.num) if rows is None else rows.tolist()):
+            rng = rngs[b]
+            if d > 0.0:
+                rng.random(out=self._unit_rows[b])
+            if sigma > 0.0:
+                rng.standard_normal(out=self._gauss_rows[b])
+        sel = slice(None) if rows is None else rows
+        if d > 0.0:
+            self.dist[sel] = -d + (d - -d) * self._unit[sel]
+        if sigma > 0.0:
+            self.noise[sel] = sigma * self._gauss[sel]
 
     def truncated(self) -> np.ndarray:
         """Rows whose episode has reached its length in true anomaly."""
