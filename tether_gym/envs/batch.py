@@ -103,14 +103,14 @@ class ChainBatch:
         self._n_substeps = config.n_substeps
         self._length_min, self._length_max = config.length_bounds
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
-        # standard uniform / normal variates of each step, and their rows as views
+        # standard uniform / normal variates of each draw, and their rows as views
         # (built once: rng.random(out=...) then costs no view per draw)
         self._unit = np.zeros((num, n))
         self._gauss = np.zeros((num, 4 * n))
         self._unit_rows = list(self._unit)
         self._gauss_rows = list(self._gauss)
         self._all_rows = np.arange(num, dtype=np.int64)
-        # info entries of every row, kept up to date by the kernels (see _info_values)
+        # info entries of every row, kept up to date by the kernels (see info)
         self.info_s = np.zeros((len(INFO_SCALARS) + len(COMPONENTS), num))
         self.info_v = np.zeros((len(INFO_VECTORS), num, n))
         self._work = make_row_work(n, 1)  # scratch of the kernels, one lane per thread chunk
@@ -141,7 +141,9 @@ class ChainBatch:
                 scale[i] = rng.uniform(1.0 - cfg.mass_range, 1.0 + cfg.mass_range, n)
             unit[i] = rng.uniform(-1.0, 1.0, 3 * n)
             if cfg.obs_noise > 0.0:
-                self.noise[b] = rng.normal(0.0, cfg.obs_noise, 4 * n)
+                rng.standard_normal(out=self._gauss_rows[b])
+        if cfg.obs_noise > 0.0:
+            self._scale_noise(rows)
         if cfg.randomised:
             masses = np.asarray(cfg.masses, dtype=float)
             self.par[rows] = cfg.param_rows(ecc, masses if scale is None else masses * scale)
@@ -224,7 +226,12 @@ class ChainBatch:
         if d > 0.0:
             self.dist[sel] = -d + (d - -d) * self._unit[sel]
         if sigma > 0.0:
-            self.noise[sel] = sigma * self._gauss[sel]
+            self._scale_noise(sel)
+
+    def _scale_noise(self, sel) -> None:
+        """noise = sigma z for the rows ``sel`` (numpy's ``normal(0, sigma)`` of the
+        standard variates z drawn into ``_gauss``)."""
+        self.noise[sel] = self.config.obs_noise * self._gauss[sel]
 
     def truncated(self) -> np.ndarray:
         """Rows whose episode has reached its length in true anomaly."""
@@ -233,10 +240,8 @@ class ChainBatch:
     # ------------------------------------------------------------------ #
     def info(self, b: int) -> dict:
         """The documented ``info`` dict of row b (floats and fresh (n,) arrays)."""
-        scalars = dict(zip(_SCALAR_KEYS, self.info_s[:, b].tolist(), strict=True))
-        vectors = dict(zip(INFO_VECTORS, self.info_v[:, b].copy(), strict=True))
-        scalars["failure"] = _FAILURE_LABELS[self.failure[b]]
-        return {key: scalars[key] if key in scalars else vectors[key] for key in INFO_KEYS}
+        return _info_dict(self.info_s[:, b].tolist(), self.info_v[:, b].copy(),
+                          _FAILURE_LABELS[self.failure[b]])
 
     def info_arrays(self) -> dict:
         """Every row's :meth:`info` stacked: a dict of fresh (num, ...) arrays.
@@ -246,7 +251,12 @@ class ChainBatch:
         vector-env infos (without the ``_key`` masks). The entries are views of two
         fresh copies of the info buffers that the kernels keep up to date.
         """
-        scalars = dict(zip(_SCALAR_KEYS, self.info_s.copy(), strict=True))
-        vectors = dict(zip(INFO_VECTORS, self.info_v.copy(), strict=True))
-        scalars["failure"] = _FAILURE_LABELS[self.failure]
-        return {key: scalars[key] if key in scalars else vectors[key] for key in INFO_KEYS}
+        return _info_dict(self.info_s.copy(), self.info_v.copy(), _FAILURE_LABELS[self.failure])
+
+
+def _info_dict(scalars, vectors, failure) -> dict:
+    """The info dict in INFO_KEYS order from the rows of the two info buffers."""
+    values = dict(zip(_SCALAR_KEYS, scalars, strict=True))
+    values.update(zip(INFO_VECTORS, vectors, strict=True))
+    values["failure"] = failure
+    return {key: values[key] for key in INFO_KEYS}

@@ -26,7 +26,8 @@ from ..physics.jit import INLINE, KERNEL, LOOP
 from ..tasks.reward import reward_terms
 from ..tasks.termination import failure_code
 
-__all__ = ["step_rows", "step_rows_parallel", "start_rows", "write_outputs", "make_row_work",
+__all__ = ["step_rows", "step_rows_parallel", "start_rows", "write_outputs", "anomaly_terms",
+           "make_row_work",
            "INFO_SCALARS", "INFO_VECTORS", "N_COMPONENTS"]
 
 N_COMPONENTS = 5
@@ -41,19 +42,27 @@ INFO_VECTORS = ("theta", "dtheta", "length", "dlength", "ddlength", "tension", "
 
 
 @njit(**INLINE)
-def write_outputs(b, sn, cn, ref, dref, y, par, with_params, noise, obs, deriv_end,
+def anomaly_terms(nu, amplitude, frequency):
+    """(sin nu, cos nu, theta_d, theta_d') with theta_d = A sin(w nu) [rad] (paper Eq. 8)."""
+    phase = frequency * nu
+    return (math.sin(nu), math.cos(nu), amplitude * math.sin(phase),
+            amplitude * frequency * math.cos(phase))
+
+
+@njit(**INLINE)
+def write_outputs(b, nu, sn, cn, ref, dref, y, par, with_params, noise, obs, deriv_end,
                   tension_end, tension_min, components, accel_scale, scalars, vectors):
     """Row b's observation and ``info`` entries, from its state at true anomaly nu.
 
-    ``sn``, ``cn`` = sin nu, cos nu and ``ref``, ``dref`` = A sin(w nu),
-    A w cos(w nu) are computed once by the caller. The observation row (layout in the
-    module docstring) gets ``noise[b]`` added to [theta, theta', l, l'].
+    ``sn, cn, ref, dref`` are :func:`anomaly_terms` of nu, computed once by the
+    caller. The observation row (layout in the module docstring) gets ``noise[b]``
+    added to [theta, theta', l, l'].
     ``scalars[:, b]`` (len(INFO_SCALARS) + N_COMPONENTS entries) and ``vectors[:, b]``
     (len(INFO_VECTORS), n) receive the info entries (see ChainBatch.info) in the
     orders of INFO_SCALARS (then the reward components) and INFO_VECTORS; the
     derived one is the reels' physical acceleration reel_accel = L0 n^2 (k^4 l'' -
     2 e sin(nu) k^3 l') [m/s^2], k = 1 + e cos(nu), with powers from ``math.pow``
-    (libm), as numpy's scalar ``**`` does. ``scalars[0, b]`` (nu) is the caller's.
+    (libm), as numpy's scalar ``**`` does.
     """
     m = y.shape[1]
     n = m // 4
@@ -70,6 +79,7 @@ def write_outputs(b, sn, cn, ref, dref, y, par, with_params, noise, obs, deriv_e
         for j in range(n):
             out[5 + m + j] = (par[kernels.P_TAIL + j]
                               - (par[kernels.P_TAIL + j + 1] if j + 1 < n else 0.0))
+    scalars[0, b] = nu
     scalars[1, b] = ref
     scalars[2, b] = dref
     scalars[3, b] = ecc
@@ -192,11 +202,7 @@ def _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, f
     nu_new = kernels.advance_one(nu[b], yb, cmd, dist[b], pb, h, n_sub, scratch,
                                  tension_min[b], deriv_end[b], tension_end[b])
     nu[b] = nu_new
-    sn = math.sin(nu_new)
-    cn = math.cos(nu_new)
-    phase = frequency * nu_new
-    ref = amplitude * math.sin(phase)
-    dref = amplitude * frequency * math.cos(phase)
+    sn, cn, ref, dref = anomaly_terms(nu_new, amplitude, frequency)
     code = failure_code(yb, tension_min[b], length_min, length_max)
     failure[b] = code
     if code == 1:
@@ -223,9 +229,8 @@ def _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, f
         reward[b] = reward_terms(yb[0:n], yb[n:2 * n], yb[2 * n:3 * n], ref, dref, act,
                                  accel, tension_min[b], length_nominal, weights,
                                  components[b])
-    info_s[0, b] = nu_new
-    write_outputs(b, sn, cn, ref, dref, y, pb, with_params, noise, obs, deriv_end, tension_end,
-                  tension_min, components, accel_scale, info_s, info_v)
+    write_outputs(b, nu_new, sn, cn, ref, dref, y, pb, with_params, noise, obs, deriv_end,
+                  tension_end, tension_min, components, accel_scale, info_s, info_v)
 
 
 @njit(**LOOP)
@@ -255,12 +260,8 @@ def start_rows(rows, nu, y, par, amplitude, frequency, with_params, noise, obs, 
         for j in range(n):
             tension_end[b, j] = tens[j]
             tension_min[b, j] = tens[j]
-        x = nu[b]
-        phase = frequency * x
-        info_s[0, b] = x
-        write_outputs(b, math.sin(x), math.cos(x), amplitude * math.sin(phase),
-                      amplitude * frequency * math.cos(phase), y, pb, with_params, noise, obs,
-                      deriv_end, tension_end, tension_min, components, accel_scale, info_s,
-                      info_v)
+        sn, cn, ref, dref = anomaly_terms(nu[b], amplitude, frequency)
+        write_outputs(b, nu[b], sn, cn, ref, dref, y, pb, with_params, noise, obs, deriv_end,
+                      tension_end, tension_min, components, accel_scale, info_s, info_v)
 
 

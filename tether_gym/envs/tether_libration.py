@@ -199,7 +199,7 @@ class TetherLibrationEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         self._rngs[0] = self.np_random
-        self._batch.reset_rows((0,), (self.np_random,), options)
+        self._batch.reset_rows((0,), self._rngs, options)
         self._needs_reset = False
         if self.render_mode == "human":
             self.render()
@@ -211,7 +211,7 @@ class TetherLibrationEnv(gym.Env):
         batch = self._batch
         batch.step(check_action(action, self.config.n_tethers), self._rngs)
         terminated = bool(batch.failure[0] != 0)
-        truncated = bool(batch.nu[0] >= batch.nu_end[0] - 1e-9) and not terminated
+        truncated = bool(batch.truncated()[0]) and not terminated
         self._needs_reset = terminated or truncated
         if self.render_mode == "human":
             self.render()
