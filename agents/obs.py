@@ -7,11 +7,15 @@ from typing import NamedTuple
 
 import numpy as np
 
+from tether_gym.envs.layout import OBSERVATION
+
 __all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy"]
 
 
 class ObservedState(NamedTuple):
-    """The observation's fields, each with a leading batch axis."""
+    """The observation's fields (:data:`tether_gym.envs.layout.OBSERVATION`), each with a
+    leading batch axis; scalars are (B,), per-tether fields (B, n), absent optional
+    fields None."""
 
     sin_nu: np.ndarray
     cos_nu: np.ndarray
@@ -22,7 +26,10 @@ class ObservedState(NamedTuple):
     theta_ref: np.ndarray
     dtheta_ref: np.ndarray
     eccentricity: np.ndarray | None
-    masses: np.ndarray | None
+    mass_fractions: np.ndarray | None
+
+
+assert ObservedState._fields == OBSERVATION.names, "ObservedState must follow OBSERVATION"
 
 
 @dataclass(frozen=True)
@@ -53,9 +60,8 @@ class ObservationLayout:
 
     @property
     def obs_dim(self) -> int:
-        """Length of one observation: 4(N-1) + 4 (+ N with the parameters)."""
-        n = self.n_tethers
-        return 4 * n + 4 + ((1 + n) if self.with_params else 0)
+        """Length of one observation (OBSERVATION's size for this n and switch)."""
+        return OBSERVATION.size(self.n_tethers, params=self.with_params)
 
     def as_batch(self, observation) -> tuple[np.ndarray, bool]:
         """(obs as a float64 (B, obs_dim) batch, whether a single observation was given).
@@ -72,19 +78,18 @@ class ObservationLayout:
                          f"(N-1 = {self.n_tethers} tethers), got {obs.shape}")
 
     def split(self, obs: np.ndarray) -> ObservedState:
-        n = self.n_tethers
+        """The fields of a (B, obs_dim) batch of observations (views)."""
         obs = np.asarray(obs, dtype=np.float64)
         expected = self.obs_dim
         if obs.ndim != 2 or obs.shape[1] != expected:
             raise ValueError(f"observation batch must have shape (B, {expected}), got {obs.shape}")
-        m = 4 * n
-        return ObservedState(
-            obs[:, 0], obs[:, 1], obs[:, 2:2 + n], obs[:, 2 + n:2 + 2 * n],
-            obs[:, 2 + 2 * n:2 + 3 * n], obs[:, 2 + 3 * n:2 + m], obs[:, 2 + m],
-            obs[:, 3 + m],
-            obs[:, 4 + m] if self.with_params else None,
-            obs[:, 5 + m:5 + m + n] if self.with_params else None,
-        )
+        slices = OBSERVATION.slices(self.n_tethers, params=self.with_params)
+        values = {}
+        for f in OBSERVATION:
+            sl = slices.get(f.name)
+            values[f.name] = (None if sl is None else
+                              obs[:, sl] if f.per_tether else obs[:, sl.start])
+        return ObservedState(**values)
 
     def to_action(self, reel_rate: np.ndarray) -> np.ndarray:
         """Commanded l' [-] -> action in [-1, 1] (float32), clipped."""

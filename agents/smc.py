@@ -84,7 +84,7 @@ class SlidingModeController(ReelRatePolicy):
             f = np.empty_like(st.theta)
             B = np.empty(st.theta.shape + (st.theta.shape[1],))
             for b in range(nu.shape[0]):
-                chain = TetherChain(st.masses[b], float(st.eccentricity[b]),
+                chain = TetherChain(st.mass_fractions[b], float(st.eccentricity[b]),
                                     self.model.gravity, self.model.length_ratio)
                 f[b], B[b], _ = chain.control_affine(nu[b], st.theta[b], st.dtheta[b],
                                                      st.length[b])

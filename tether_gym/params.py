@@ -1,7 +1,8 @@
 """Validated, immutable parameters of the tethered chain and its orbit.
 
-This is the one module that converts between SI units and the dimensionless
-variables of Shi, Zhu & Zhu (2019), Sec. 2:
+The model is dimensionless (Shi, Zhu & Zhu (2019), Sec. 2);
+:class:`tether_gym.physics.scales.Scales` is the one object that converts between
+SI units and the dimensionless variables:
 
 =============================  ===============================  =====================
 quantity                       dimensionless form               scale
@@ -15,7 +16,7 @@ tension T_i [N]                T^_i = T_i/(nu_dot^2 L0 m_tot)   nu_dot^2 L0 m_to
 =============================  ===============================  =====================
 
 ``n = sqrt(mu / p^3)`` is the orbit's rate scale [rad/s]; ``nu_dot = n k^2`` with
-``k = 1 + e cos(nu)``.
+``k = 1 + e cos(nu)`` (docs/model.md, "Dimensionless variables").
 """
 
 from __future__ import annotations
@@ -33,6 +34,8 @@ __all__ = [
     "OrbitParams",
     "ChainParams",
     "ReelParams",
+    "check_masses",
+    "check_lengths",
     "check_finite",
     "check_range",
     "as_float_tuple",
@@ -120,6 +123,24 @@ def as_float_tuple(name: str, value, length: int | None = None) -> tuple[float, 
     return tuple(float(x) for x in arr)
 
 
+def check_masses(masses, n: int | None = None) -> tuple[float, ...]:
+    """Subsatellite masses as a tuple of floats, each > 0 (n of them when given)."""
+    masses = as_float_tuple("masses", masses, n)
+    if len(masses) < 1:
+        raise ValueError(f"masses={masses!r}: need at least one subsatellite (N >= 2)")
+    if min(masses) <= 0.0:
+        raise ValueError(f"masses={masses!r} must all be > 0")
+    return masses
+
+
+def check_lengths(name: str, lengths, n: int | None = None) -> tuple[float, ...]:
+    """Tether lengths l_i [-] as a tuple of floats, each > 0 (n of them when given)."""
+    lengths = as_float_tuple(name, lengths, n)
+    if not lengths or min(lengths) <= 0.0:
+        raise ValueError(f"{name}={lengths!r} must all be > 0")
+    return lengths
+
+
 @dataclass(frozen=True)
 class OrbitParams:
     """Keplerian orbit of the main satellite.
@@ -179,14 +200,8 @@ class ChainParams:
     gravity: Gravity = Gravity.GRADIENT
 
     def __post_init__(self) -> None:
-        masses = as_float_tuple("masses", self.masses)
-        if len(masses) < 1:
-            raise ValueError(f"masses={self.masses!r}: need N-1 >= 1 subsatellites (N >= 2)")
-        if min(masses) <= 0.0:
-            raise ValueError(f"masses={self.masses!r} must all be > 0")
-        lengths = as_float_tuple("initial_lengths", self.initial_lengths, len(masses))
-        if min(lengths) <= 0.0:
-            raise ValueError(f"initial_lengths={self.initial_lengths!r} must all be > 0")
+        masses = check_masses(self.masses)
+        lengths = check_lengths("initial_lengths", self.initial_lengths, len(masses))
         check_range("total_tether_length", self.total_tether_length, 0.0, low_open=True)
         object.__setattr__(self, "masses", masses)
         object.__setattr__(self, "initial_lengths", lengths)
@@ -205,7 +220,7 @@ class ChainParams:
 
 @dataclass(frozen=True)
 class ReelParams:
-    """Reel actuators, one per tether (physics.reel).
+    """Reel actuators, one per tether (:func:`tether_gym.physics.kernels._reel`).
 
     Parameters
     ----------
@@ -216,11 +231,14 @@ class ReelParams:
     time_constant : float
         tau [rad] of the first-order reel response l'' = (l'_cmd - l') / tau that
         the acceleration limit then saturates, > 0.
+    max_rate : float
+        Largest commanded reel rate |l'_cmd| [-] (an action of +-1), in (0, 10].
     """
 
     accel_limit: float | None = 0.01
     speed_limit: float | None = None
     time_constant: float = 0.0125
+    max_rate: float = 0.5
 
     def __post_init__(self) -> None:
         if self.accel_limit is not None:
@@ -228,3 +246,5 @@ class ReelParams:
         if self.speed_limit is not None:
             check_range("speed_limit", self.speed_limit, 0.0, low_open=True)
         check_range("time_constant", self.time_constant, 0.0, low_open=True)
+        check_range("max_reel_rate", self.max_rate, 0.0, 10.0, low_open=True)
+

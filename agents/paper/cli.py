@@ -141,7 +141,7 @@ def reproduce(out_dir, orbits: float | None = None, quick: bool = False, log=pri
         env.close()
         m = smc_metrics(traj)
         res["l0_sweep"].append({"L0_km": l0_km, "notes_bound": notes_bound,
-                                "accel_bound": cfg.accel_limit / cfg.accel_scale,
+                                "accel_bound": cfg.scales.accel_bound(cfg.accel_limit),
                                 "mean_total_length": m["mean_total_length_after_orbit_1"],
                                 "convergence_orbits": m["convergence_orbits"],
                                 "min_length": m["min_length"], "failure": m["failure"],

@@ -13,14 +13,15 @@ import pytest
 
 from tether_gym.envs import EnvConfig
 from tether_gym.envs.batch import ChainBatch
-from tether_gym.physics import kernels
+from tether_gym.physics import PARAMS
 
 RANDOMISED = dict(n_bodies=4, eccentricity_range=(0.05, 0.25), mass_range=0.3,
                   init_theta_range=0.1, init_dtheta_range=0.05, init_length_range=0.1,
                   obs_noise=1e-3)
 
-STATE = ("nu", "nu_end", "y", "par", "noise", "obs", "reward", "components", "failure",
-         "tension_min", "tension_end", "deriv_end", "steps")
+def _arrays(batch):
+    """Every per-row array of a batch, by name."""
+    return {**batch.rows._asdict(), "nu_end": batch.nu_end, "steps": batch.steps}
 
 
 @pytest.mark.parametrize("kwargs", [{}, RANDOMISED, dict(RANDOMISED, mass_range=None),
@@ -35,8 +36,8 @@ def test_batched_reset_equals_row_by_row_resets(kwargs, options):
     together.reset_rows(rows, rngs_t, options)
     for b in rows:
         alone.reset_rows([b], rngs_a, options)
-    for name in STATE:
-        assert np.array_equal(getattr(together, name), getattr(alone, name)), name
+    for name, value in _arrays(together).items():
+        assert np.array_equal(value, _arrays(alone)[name]), name
     # every row drew from its own generator and nothing else: the streams agree after
     assert [r.random() for r in rngs_t] == [r.random() for r in rngs_a]
     # rows that were not listed keep their (zero) state
@@ -51,18 +52,21 @@ def test_param_rows_pack_independent_tail_fractions():
     ecc = rng.uniform(0.0, 0.3, 7)
     masses = rng.uniform(0.5, 3.0, (7, 4))
     rows = config.param_rows(ecc, masses)
-    a_bound = config.accel_limit / config.accel_scale
+    a_bound = config.accel_limit / (config.total_tether_length * config.orbit.rate_scale**2)
+    sl = PARAMS.slices(4)
     for b in range(7):
         tail = [masses[b, j:].sum() / masses[b].sum() for j in range(4)]
-        expected = kernels.pack_params(ecc[b], tail, kernels.GRAVITY_GRADIENT,
-                                       config.total_tether_length / config.semi_latus_rectum,
-                                       a_bound, np.inf, config.reel_time_constant)
-        np.testing.assert_allclose(rows[b], expected, rtol=1e-15, atol=0.0)
-        assert np.array_equal(config.param_row(ecc[b], masses[b]), rows[b])
+        np.testing.assert_allclose(rows[b, sl["tail_mass"]], tail, rtol=1e-15, atol=0.0)
+        expected = {"eccentricity": ecc[b], "gravity": 0.0, "accel_bound": a_bound,
+                    "length_ratio": config.total_tether_length / config.semi_latus_rectum,
+                    "speed_bound": np.inf, "time_constant": config.reel_time_constant}
+        for name, value in expected.items():
+            assert rows[b, sl[name]] == pytest.approx(value, rel=1e-15), name
+        assert np.array_equal(config.param_rows(ecc[b], masses[b]), rows[b])
     # masses of shape (n,) are shared by every row
     shared = config.param_rows(ecc, masses[0])
-    assert np.array_equal(shared, np.tile(config.param_row(0.0, masses[0]), (7, 1))
-                          + np.eye(1, shared.shape[1], kernels.P_ECC) * ecc[:, None])
+    for b in range(7):
+        assert np.array_equal(shared[b], config.param_rows(ecc[b], masses[0]))
 
 
 @pytest.mark.parametrize("rows", [None, [4, 1]])
@@ -73,7 +77,7 @@ def test_step_draws_are_each_rows_uniform_then_normal(rows):
     batch = ChainBatch(config, 6)
     rngs = [np.random.default_rng(7 + b) for b in range(6)]
     batch.reset_rows(range(6), rngs)
-    before_dist, before_noise = batch.dist.copy(), batch.noise.copy()
+    before_dist, before_noise = batch.rows.disturbance.copy(), batch.rows.noise.copy()
     copies = [np.random.Generator(np.random.PCG64()) for _ in range(6)]
     for copy, rng in zip(copies, rngs, strict=True):
         copy.bit_generator.state = rng.bit_generator.state
@@ -81,9 +85,9 @@ def test_step_draws_are_each_rows_uniform_then_normal(rows):
     stepped = range(6) if rows is None else rows
     for b in range(6):
         if b in stepped:
-            assert np.array_equal(batch.dist[b], copies[b].uniform(-0.1, 0.1, 3))
-            assert np.array_equal(batch.noise[b], copies[b].normal(0.0, 1e-3, 12))
+            assert np.array_equal(batch.rows.disturbance[b], copies[b].uniform(-0.1, 0.1, 3))
+            assert np.array_equal(batch.rows.noise[b], copies[b].normal(0.0, 1e-3, 12))
             assert copies[b].random() == rngs[b].random()
         else:  # rows not stepped draw nothing
-            assert np.array_equal(batch.dist[b], before_dist[b])
-            assert np.array_equal(batch.noise[b], before_noise[b])
+            assert np.array_equal(batch.rows.disturbance[b], before_dist[b])
+            assert np.array_equal(batch.rows.noise[b], before_noise[b])

@@ -89,7 +89,7 @@ def test_every_field_is_a_documented_argument():
 
 
 def test_defaults_match_registration_and_paper_case():
-    cfg = EnvConfig()
+    cfg = EnvConfig.from_kwargs()
     assert cfg.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS == 754
     assert cfg.max_episode_steps == math.ceil(3 * 2 * math.pi / 0.025)
     assert gym.spec(ENV_ID).max_episode_steps == cfg.max_episode_steps
@@ -103,20 +103,20 @@ def test_defaults_match_registration_and_paper_case():
                           (4, True, 20)])
 def test_obs_dim_formula(n_bodies, randomised, dim):
     extra = {"mass_range": 0.1} if randomised else {}
-    cfg = EnvConfig(n_bodies=n_bodies, **extra)
+    cfg = EnvConfig.from_kwargs(n_bodies=n_bodies, **extra)
     assert cfg.randomised is randomised
     assert cfg.obs_dim == dim  # 4(N-1) + 4 (+ N when randomised)
 
 
 def test_defaults_for_other_chain_sizes():
-    cfg = EnvConfig(n_bodies=4)
+    cfg = EnvConfig.from_kwargs(n_bodies=4)
     assert cfg.masses == (1.0, 1.0, 1.0)
     assert cfg.initial_lengths == pytest.approx((1 / 3,) * 3, abs=1e-15)
     assert cfg.initial_theta == (0.1, 0.0, 0.0)
 
 
 def test_config_is_frozen_and_normalised():
-    cfg = EnvConfig(masses=[1, 2], length_bounds=[0.1, 1.0], gravity="FULL")
+    cfg = EnvConfig.from_kwargs(masses=[1, 2], length_bounds=[0.1, 1.0], gravity="FULL")
     assert cfg.masses == (1.0, 2.0) and isinstance(cfg.masses, tuple)
     assert cfg.length_bounds == (0.1, 1.0)
     assert cfg.gravity == "full"
@@ -125,7 +125,7 @@ def test_config_is_frozen_and_normalised():
 
 
 def test_episode_steps_follow_orbits_per_episode():
-    assert EnvConfig(orbits_per_episode=0.1).max_episode_steps == math.ceil(0.1 * 2 * math.pi
-                                                                             / 0.025) == 26
-    assert EnvConfig(orbits_per_episode=1.0, control_step=0.05,
+    steps = EnvConfig.from_kwargs(orbits_per_episode=0.1).max_episode_steps
+    assert steps == math.ceil(0.1 * 2 * math.pi / 0.025) == 26
+    assert EnvConfig.from_kwargs(orbits_per_episode=1.0, control_step=0.05,
                      physics_step=0.01).max_episode_steps == math.ceil(2 * math.pi / 0.05)

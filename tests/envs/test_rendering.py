@@ -43,7 +43,7 @@ def _pixel(renderer, axes, x, y):
 
 @pytest.fixture
 def renderer():
-    r = ChainRenderer(EnvConfig(), "rgb_array")
+    r = ChainRenderer(EnvConfig.from_kwargs(), "rgb_array")
     yield r
     r.close()
 
@@ -132,7 +132,7 @@ def test_blitted_frames_equal_full_redraws(renderer):
               (_info(nu=5.0), 0.45)]
     for info, ecc in states:
         blitted = renderer.draw(info, ecc)
-        fresh = ChainRenderer(EnvConfig(), "rgb_array")
+        fresh = ChainRenderer(EnvConfig.from_kwargs(), "rgb_array")
         for artist in fresh._dynamic:  # render everything in one full draw
             artist.set_animated(False)
         fresh.draw(info, ecc)
@@ -154,7 +154,7 @@ def test_frame_time(renderer):
 
 
 def test_four_bodies_and_failure_text():
-    r = ChainRenderer(EnvConfig(n_bodies=4), "rgb_array")
+    r = ChainRenderer(EnvConfig.from_kwargs(n_bodies=4), "rgb_array")
     frame = r.draw(_info(theta=(0.1, 0.2, 0.3), length=(0.3, 0.3, 0.3), tension=(3, 2, 1),
                          failure="tumble"), 0.2)
     assert frame.shape == (FRAME_SIZE, FRAME_SIZE, 3)
@@ -190,7 +190,7 @@ def test_missing_matplotlib(monkeypatch):
     module = importlib.import_module("tether_gym.envs.rendering")
     hint = r'pip install "tether_gym\[plot\]"'
     with pytest.raises(DependencyNotInstalled, match=hint):
-        module.ChainRenderer(EnvConfig(), "rgb_array")
+        module.ChainRenderer(EnvConfig.from_kwargs(), "rgb_array")
     env = gym.make("tether_gym/TetherLibration-v0", render_mode="rgb_array")
     env.reset(seed=0)
     with pytest.raises(DependencyNotInstalled, match=hint):
@@ -199,7 +199,7 @@ def test_missing_matplotlib(monkeypatch):
 
 def test_bad_render_mode():
     with pytest.raises(ValueError, match="render_mode='ansi'"):
-        ChainRenderer(EnvConfig(), "ansi")
+        ChainRenderer(EnvConfig.from_kwargs(), "ansi")
 
 
 def test_record_video(make_env, tmp_path):

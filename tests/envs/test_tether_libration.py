@@ -14,7 +14,7 @@ from scipy.integrate import solve_ivp
 
 import tether_gym
 from tether_gym.envs import TetherLibrationEnv
-from tether_gym.physics import TetherChain, kernels
+from tether_gym.physics import PARAMS, TetherChain
 
 from .conftest import (
     INFO_KEYS,
@@ -260,7 +260,7 @@ def test_nonfinite_state_terminates_with_finite_obs(make_env):
     env = make_env()
     obs0, _ = env.reset(seed=0)
     # force a NaN in the dynamics: the episode's eccentricity in the kernel parameters
-    env.unwrapped._batch.par[0, kernels.P_ECC] = np.nan
+    env.unwrapped._batch.par[0, PARAMS.slices(2)["eccentricity"]] = np.nan
     obs, reward, terminated, truncated, info = env.step(np.zeros(2, np.float32))
     assert (terminated, truncated, info["failure"]) == (True, False, "nonfinite")
     assert np.all(np.isfinite(obs)) and math.isfinite(reward)

@@ -346,15 +346,15 @@ def test_render_rgb_array_gives_one_frame_per_env():
 
 def test_parallel_auto_threads_only_large_batches():
     """parallel="auto" (the default) is serial below PARALLEL_MIN_ENVS, threaded from it."""
-    import numba
+    import os
 
     from tether_gym.envs.vector import PARALLEL_MIN_ENVS
 
     small = TetherLibrationVectorEnv(4)
     assert small.parallel == "auto" and small._n_chunks(4) == 0
     big = TetherLibrationVectorEnv(PARALLEL_MIN_ENVS)
-    expected = 0 if numba.get_num_threads() < 2 else min(4 * numba.get_num_threads(),
-                                                          PARALLEL_MIN_ENVS)
+    cores = len(os.sched_getaffinity(0))
+    expected = 0 if cores < 2 else min(cores, PARALLEL_MIN_ENVS)
     assert big._n_chunks(PARALLEL_MIN_ENVS) == expected
     assert TetherLibrationVectorEnv(PARALLEL_MIN_ENVS, parallel=False)._n_chunks(200) == 0
 

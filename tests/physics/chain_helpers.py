@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from tether_gym.physics import kernels
+from tether_gym.physics import transition
 
 
 def advance(nu, y, cmd, par, h, n_sub, dist=None):
-    """Run :func:`tether_gym.physics.kernels.advance` in place on a batch.
+    """Run :func:`tether_gym.physics.transition` in place on a batch.
 
     Parameters
     ----------
@@ -23,7 +23,7 @@ def advance(nu, y, cmd, par, h, n_sub, dist=None):
     cmd : ndarray, shape (B, n)
         Commanded reel rates l'_cmd [-].
     par : ndarray, shape (1 or B, 6 + n)
-        Parameter rows from :func:`kernels.pack_params`.
+        Parameter rows (``TetherChain.param_row``).
     h : float
         RK4 step [rad].
     n_sub : int
@@ -36,15 +36,28 @@ def advance(nu, y, cmd, par, h, n_sub, dist=None):
     tension_min, deriv_end, tension_end : ndarray
         The kernel's outputs, shapes (B, n), (B, 4n), (B, n).
     """
-    batch, m = y.shape
-    n = m // 4
-    if dist is None:
-        dist = np.zeros((batch, n))
-    tension_min = np.empty((batch, n))
-    deriv_end = np.empty((batch, m))
-    tension_end = np.empty((batch, n))
-    kernels.advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end)
-    return tension_min, deriv_end, tension_end
+    out = transition(nu, y, cmd, par, h, n_sub, disturbance=dist)
+    nu[:] = out.nu
+    y[:] = out.state
+    return out.tension_min, out.derivative, out.tension
+
+
+def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
+    """Take ``n_steps`` steps with a stepper from :func:`make_rk4` (a Python loop).
+
+    Returns the array of states, shape (n_steps + 1, len(y0)).
+    """
+    y = np.array(y0, dtype=float)
+    m = y.shape[0]
+    out = np.empty((n_steps + 1, m))
+    out[0] = y
+    k1 = np.empty(m)
+    work = (np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+    for i in range(n_steps):
+        t = t0 + i * h
+        fun(t, out[i], args, k1)
+        step(t, out[i], h, args, k1, work, out[i + 1])
+    return out
 
 
 def random_states(rng, n, size, theta_scale=1.0):

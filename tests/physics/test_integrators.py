@@ -1,7 +1,7 @@
 """Tests of the generic RK4 (tether_gym.physics.integrators) and its order on the chain.
 
 Generic checks use linear and polynomial problems with known solutions; the chain
-check measures the global error of ``kernels.advance`` (the compiled RK4 on the
+check measures the global error of ``transition`` (the compiled RK4 on the
 chain's equations) against scipy's DOP853 at tight tolerance.
 """
 
@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from chain_helpers import advance
+from chain_helpers import advance, rk4_integrate
 from numba import njit
 from scipy.integrate import solve_ivp
 from scipy.linalg import expm
 
-from tether_gym.physics import TetherChain, kernels, make_rk4, rk4_integrate
+from tether_gym.physics import TetherChain, make_rk4
 
 LINEAR = np.array([[0.0, 1.0, 0.0], [-4.0, -0.1, 0.5], [0.3, 0.0, -1.0]])
 
@@ -123,7 +123,7 @@ def _dop853_reference(chain, y0, cmd, tau, t_end):
 def test_chain_rk4_error_falls_16x_when_h_halves(case):
     """Global error over one orbit at h = 2 pi/1000 over h = 2 pi/2000 is 16 (+-10 %).
 
-    kernels.advance (compiled RK4 with the chain's right-hand side and the reel lag,
+    transition (compiled RK4 with the chain's right-hand side and the reel lag,
     tau = 1) against DOP853 at rtol = 1e-13. At these steps the error (~1e-8) is far
     above roundoff and the reference error; at h ~ 0.1 a librating multi-tether chain
     is not yet in the asymptotic range (measured ratios 9-30).
@@ -132,8 +132,7 @@ def test_chain_rk4_error_falls_16x_when_h_halves(case):
     chain = TetherChain(masses, e)
     n = chain.n_tethers
     tau = 1.0
-    par = chain.par.copy()
-    par[0, kernels.P_TAU] = tau
+    par = chain.param_row(time_constant=tau)[None]
     y0 = np.concatenate([th0, dth0, l0, np.zeros(n)])
     cmd = np.asarray(cmd, dtype=float)
     reference = _dop853_reference(chain, y0, cmd, tau, 2.0 * np.pi)

@@ -1,4 +1,4 @@
-"""Validation of parameters and inputs (tether_gym.params, TetherChain, ReelActuator).
+"""Validation of parameters and inputs (tether_gym.params, TetherChain, Scales).
 
 Invalid values raise ValueError naming the offending value; wrong types raise
 TypeError. Valid inputs are normalised (floats, tuples, the Gravity enum) and the
@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from tether_gym.params import ChainParams, Gravity, OrbitParams, ReelParams
-from tether_gym.physics import ReelActuator, TetherChain
+from tether_gym.physics import Scales, TetherChain
 
 GOOD_STATE = dict(nu=0.3, theta=[0.1, -0.1], dtheta=[0.2, 0.0], length=[0.5, 0.5],
                   dlength=[0.01, 0.0], ddlength=[0.0, 0.0])
@@ -206,17 +206,17 @@ def test_reel_params_reject_bad_values(kwargs, pattern):
     lambda: ChainParams(gravity=0),
     lambda: ReelParams(accel_limit="0.01"),
     lambda: ReelParams(time_constant=None),
-    lambda: ReelActuator(OrbitParams(), "2e4"),
+    lambda: Scales(OrbitParams(), "2e4"),
 ])
 def test_params_reject_wrong_types(factory):
     with pytest.raises(TypeError):
         factory()
 
 
-def test_reel_actuator_rejects_bad_length():
+def test_scales_reject_bad_length():
     for bad in (0.0, -1.0, math.nan):
         with pytest.raises(ValueError, match=re.escape(f"total_tether_length={bad!r}")):
-            ReelActuator(OrbitParams(), bad)
+            Scales(OrbitParams(), bad)
 
 
 def test_params_are_normalised_and_frozen():

@@ -1,4 +1,4 @@
-"""Tests of the reel actuators (tether_gym.physics.reel and the reel law in kernels).
+"""Tests of the reel actuators (the reel law inside tether_gym.physics.transition).
 
 The acceleration limit is checked in physical units along integrated trajectories
 under aggressive commands (both from the integrator's l'' and from finite
@@ -8,32 +8,28 @@ first-order lag; the speed limit and the saturation law by their defining proper
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 from chain_helpers import advance
+from kepler import time_from_true_anomaly
 
-from tether_gym.params import OrbitParams, ReelParams
-from tether_gym.physics import ReelActuator, TetherChain, kernels, lengths_within, orbit
+from tether_gym.params import OrbitParams
+from tether_gym.physics import STATE, Scales, TetherChain, transition
 
 L0 = 2.0e4  # [m]
 A_MAX = 0.01  # [m/s^2], paper Sec. 4.3
 
 
-def test_bounds_are_dimensionless_limits():
-    """accel_bound = a_max / (L0 n^2) (NOTES.md: 15.5, 1.55, 0.78 for L0 = 1, 10, 20 km)."""
-    op = OrbitParams()
-    n = op.rate_scale
-    for length, expected in ((1e3, 15.5), (1e4, 1.55), (2e4, 0.776)):
-        act = ReelActuator(op, length, ReelParams(accel_limit=A_MAX))
-        assert act.accel_bound == pytest.approx(A_MAX / (length * n**2), rel=1e-15)
-        assert act.accel_bound == pytest.approx(expected, rel=5e-3)
-        assert act.speed_bound == math.inf
-    act = ReelActuator(op, L0, ReelParams(accel_limit=None, speed_limit=2.0))
-    assert act.accel_bound == math.inf
-    assert act.speed_bound == pytest.approx(2.0 / (L0 * n), rel=1e-15)
-    assert act.time_constant == ReelParams().time_constant
+def _reel_ddlength(par, nu, dl, cmd):
+    """l'' the reels produce at (nu, l') under the command (transition with 0 substeps)."""
+    dl = np.atleast_2d(dl)
+    n = dl.shape[1]
+    y = np.zeros((dl.shape[0], STATE.size(n)))
+    y[:, STATE.slices(n)["length"]] = 0.5
+    y[:, STATE.slices(n)["dlength"]] = dl
+    nu = np.broadcast_to(nu, dl.shape[:1])
+    out = transition(nu, y, np.broadcast_to(cmd, dl.shape), par, 0.0, 0)
+    return out.derivative[:, STATE.slices(n)["dlength"]]
 
 
 def _random_command_run(par, rng, batch=4, n=2, h=1e-3, n_steps=3000, hold=50):
@@ -73,42 +69,40 @@ def test_acceleration_limit_holds_in_physical_units():
     Table 1 chain, e = 0.2, L0 = 20 km (a_bound ~ 0.776), tau = 0.005, commands up
     to |l'_cmd| = 2 switched every 0.05 rad, RK4 h = 0.001 over 3 rad, 4 runs.
     Checked three ways: the integrator's l'' at every step (<= a_max (1 + 1e-12));
-    ReelActuator.ddlength at every command switch; and finite differences of the
+    the reel law alone at every command switch; and finite differences of the
     physical reel rate L_dot = L0 n k^2 l' between consecutive steps, against the
     elapsed time from the Kepler map (<= a_max (1 + 1e-6)). The limit must be active
     in a large share of the steps, and without it the same commands exceed it.
     """
     op = OrbitParams()
     e, n_rate = op.eccentricity, op.rate_scale
-    act = ReelActuator(op, L0, ReelParams(accel_limit=A_MAX))
+    scales = Scales(op, L0)
     chain = TetherChain((1.0, 2.0), e)
-    par = kernels.pack_params(e, chain.tail_masses, accel_bound=act.accel_bound,
-                              time_constant=act.time_constant)[None]
+    par = chain.param_row(accel_bound=scales.accel_bound(A_MAX), time_constant=0.005)[None]
 
     nu, dl, ddl, cmds = _random_command_run(par, np.random.default_rng(0))
-    accel = orbit.reel_accel_to_physical(nu[1:, :, None], dl[1:], ddl, e, n_rate, L0)
+    accel = scales.reel_accel_si(nu[1:, :, None], e, dl[1:], ddl)
     assert np.max(np.abs(accel)) <= A_MAX * (1.0 + 1e-12)
     assert np.mean(np.abs(accel) >= A_MAX * (1.0 - 1e-9)) > 0.3  # saturated often
 
-    # the actuator's own law at the state where each new command starts
+    # the reel law alone at the state where each new command starts
     starts = np.arange(0, cmds.shape[0], 50)
-    start_ddl = np.stack([act.ddlength(nu[i], dl[i], cmds[i]) for i in starts])
-    assert np.max(np.abs(act.physical_accel(nu[starts], dl[starts], start_ddl))) <= (
-        A_MAX * (1.0 + 1e-12))
-    np.testing.assert_array_equal(act.ddlength(nu[1:].ravel(), dl[1:].reshape(-1, 2),
-                                               cmds.reshape(-1, 2)),
+    start_ddl = np.stack([_reel_ddlength(par, nu[i], dl[i], cmds[i]) for i in starts])
+    assert np.max(np.abs(scales.reel_accel_si(nu[starts, :, None], e, dl[starts],
+                                              start_ddl))) <= A_MAX * (1.0 + 1e-12)
+    np.testing.assert_array_equal(_reel_ddlength(par, nu[1:].ravel(), dl[1:].reshape(-1, 2),
+                                                 cmds.reshape(-1, 2)),
                                   ddl.reshape(-1, 2))
 
-    t = orbit.time_from_true_anomaly(nu, e, n_rate)
-    rate = orbit.reel_rate_to_physical(nu[:, :, None], dl, e, n_rate, L0)
+    t = time_from_true_anomaly(nu, e, n_rate)
+    rate = scales.reel_rate_si(nu[:, :, None], e, dl)
     fd = np.diff(rate, axis=0) / np.diff(t, axis=0)[:, :, None]
     assert np.max(np.abs(fd)) <= A_MAX * (1.0 + 1e-6)
 
-    free = par.copy()
-    free[0, kernels.P_ABOUND] = math.inf
+    free = chain.param_row(time_constant=0.005)[None]
     nu, dl, _, _ = _random_command_run(free, np.random.default_rng(0))
-    rate = orbit.reel_rate_to_physical(nu[:, :, None], dl, e, n_rate, L0)
-    t = orbit.time_from_true_anomaly(nu, e, n_rate)
+    rate = scales.reel_rate_si(nu[:, :, None], e, dl)
+    t = time_from_true_anomaly(nu, e, n_rate)
     assert np.max(np.abs(np.diff(rate, axis=0) / np.diff(t, axis=0)[:, :, None])) > 10 * A_MAX
 
 
@@ -126,7 +120,7 @@ def test_unlimited_reel_is_first_order_lag(e):
     tau = 0.05
     n = 3
     chain = TetherChain((1.0, 2.0, 1.5), e)
-    par = kernels.pack_params(e, chain.tail_masses, time_constant=tau)[None]
+    par = chain.param_row(time_constant=tau)[None]
     c = np.array([[0.08, -0.05, 0.03]])
     l0 = np.array([0.4, 0.3, 0.3])
     y = np.concatenate([[0.1, -0.1, 0.05], np.zeros(n), l0, np.zeros(n)])[None]
@@ -152,7 +146,7 @@ def test_unlimited_reel_is_first_order_lag(e):
 
 @pytest.mark.parametrize("e", [0.0, 0.2, 0.7])
 def test_saturation_law_properties(e):
-    """ReelActuator.ddlength: the physical |L_ddot| <= a_max; unsaturated it is the lag.
+    """The reel law: the physical |L_ddot| <= a_max; unsaturated it is the lag.
 
     Random (nu, l', l'_cmd): where the lag's physical demand
     L0 n^2 (k^4 (c - l')/tau - 2 e sin(nu) k^3 l') is within a_max, l'' = (c - l')/tau;
@@ -160,20 +154,23 @@ def test_saturation_law_properties(e):
     """
     rng = np.random.default_rng(2)
     op = OrbitParams(eccentricity=e)
-    act = ReelActuator(op, L0, ReelParams(accel_limit=A_MAX, time_constant=0.02))
+    scales = Scales(op, L0)
+    tau = 0.02
+    par = TetherChain((1.0, 2.0), e).param_row(accel_bound=scales.accel_bound(A_MAX),
+                                               time_constant=tau)
     nu = rng.uniform(-5.0, 15.0, 2000)
     dl = rng.uniform(-0.3, 0.3, (2000, 2))
     cmd = dl + rng.normal(0.0, 0.02, (2000, 2))
-    ddl = act.ddlength(nu, dl, cmd)
-    lag = (cmd - dl) / act.time_constant
-    demand = act.physical_accel(nu, dl, lag)
-    accel = act.physical_accel(nu, dl, ddl)
+    ddl = _reel_ddlength(par, nu, dl, cmd)
+    lag = (cmd - dl) / tau
+    demand = scales.reel_accel_si(nu[:, None], e, dl, lag)
+    accel = scales.reel_accel_si(nu[:, None], e, dl, ddl)
     inside = np.abs(demand) <= A_MAX
     assert 0.2 < inside.mean() < 0.8  # both branches exercised
     assert np.max(np.abs(accel)) <= A_MAX * (1.0 + 1e-12)
     np.testing.assert_allclose(ddl[inside], lag[inside], rtol=1e-13, atol=1e-15)
     np.testing.assert_allclose(accel[~inside], A_MAX * np.sign(demand[~inside]), rtol=1e-12)
-    np.testing.assert_allclose(act.physical_rate(nu, dl),
+    np.testing.assert_allclose(scales.reel_rate_si(nu[:, None], e, dl),
                                L0 * op.rate_scale * (1.0 + e * np.cos(nu[:, None])) ** 2 * dl,
                                rtol=1e-15)
 
@@ -181,27 +178,23 @@ def test_saturation_law_properties(e):
 def test_speed_limit_clips_the_command():
     """With a speed limit the command is clipped to |L_dot| = L0 n k^2 |l'_cmd| <= v_max."""
     rng = np.random.default_rng(3)
-    op = OrbitParams(eccentricity=0.3)
+    e = 0.3
+    scales = Scales(OrbitParams(eccentricity=e), L0)
     v_max = 1.5  # [m/s]
-    act = ReelActuator(op, L0, ReelParams(accel_limit=None, speed_limit=v_max,
-                                          time_constant=0.01))
+    tau = 0.01
+    par = TetherChain((1.0, 2.0), e).param_row(speed_bound=scales.speed_bound(v_max),
+                                               time_constant=tau)
     nu = rng.uniform(0.0, 2.0 * np.pi, 500)
     dl = rng.uniform(-0.05, 0.05, (500, 2))
     cmd = rng.uniform(-0.3, 0.3, (500, 2))
-    cap = act.speed_bound / (1.0 + 0.3 * np.cos(nu[:, None])) ** 2
-    ddl = act.ddlength(nu, dl, cmd)
-    np.testing.assert_allclose(ddl, (np.clip(cmd, -cap, cap) - dl) / act.time_constant,
+    cap = scales.speed_bound(v_max) / (1.0 + e * np.cos(nu[:, None])) ** 2
+    ddl = _reel_ddlength(par, nu, dl, cmd)
+    np.testing.assert_allclose(ddl, (np.clip(cmd, -cap, cap) - dl) / tau,
                                rtol=1e-13, atol=1e-15)
     clipped = np.abs(cmd) > cap
     assert 0.2 < clipped.mean() < 0.9
     # the clipped command is exactly the physical speed limit
     steady = np.clip(cmd, -cap, cap)
-    np.testing.assert_allclose(np.abs(act.physical_rate(nu, steady))[clipped], v_max, rtol=1e-14)
-    assert np.all(np.abs(act.physical_rate(nu, steady)) <= v_max * (1.0 + 1e-14))
-
-
-def test_lengths_within():
-    """lengths_within is True where all lengths lie in [low, high] (bounds inclusive)."""
-    lengths = np.array([[0.1, 0.5], [0.05, 0.5], [0.1, 1.0], [0.2, 1.2]])
-    np.testing.assert_array_equal(lengths_within(lengths, 0.1, 1.0), [True, False, True, False])
-    assert lengths_within([0.3, 0.4], 0.1, 1.0)
+    speed = np.abs(scales.reel_rate_si(nu[:, None], e, steady))
+    np.testing.assert_allclose(speed[clipped], v_max, rtol=1e-14)
+    assert np.all(speed <= v_max * (1.0 + 1e-14))

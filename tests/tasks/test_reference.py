@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from chain_helpers import rk4_integrate
 from scipy.integrate import quad
 
-from tether_gym.physics import TetherChain, make_rk4, rk4_integrate
+from tether_gym.physics import TetherChain, make_rk4
 from tether_gym.tasks.reference import (
     desired_libration,
     periodic_length_small_amplitude,

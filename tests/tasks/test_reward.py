@@ -5,17 +5,26 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tether_gym.tasks.reward import COMPONENTS, RewardWeights, reward_terms
+from tether_gym.tasks.reward import (
+    COMPONENTS,
+    PENALTIES,
+    RewardWeights,
+    penalty_terms,
+    reward_terms,
+)
 
 
 def _reward(theta=(0.2, 0.2), dtheta=(0.3, 0.3), length=(0.5, 0.5), ref=0.2, dref=0.3,
             action=(0.0, 0.0), accel=(0.0, 0.0), tension=(2.0, 2.0), nominal=(0.5, 0.5),
             weights=None):
     out = np.empty(len(COMPONENTS))
-    w = (weights or RewardWeights()).as_tuple()
-    r = reward_terms(*(np.asarray(x, dtype=float) for x in (theta, dtheta, length)), ref, dref,
-                     *(np.asarray(x, dtype=float) for x in (action, accel, tension, nominal)),
-                     w, out)
+    params = (weights or RewardWeights()).record()
+    y = np.concatenate([theta, dtheta, length, np.zeros(len(theta))]).astype(float)
+    n = len(theta)
+    raw = np.empty(len(PENALTIES))
+    penalty_terms(y, n, *(np.asarray(x, dtype=float) for x in (action, accel, tension, nominal)),
+                  params, raw)
+    r = reward_terms(y, n, ref, dref, params, raw, out)
     return r, dict(zip(COMPONENTS, out, strict=True))
 
 

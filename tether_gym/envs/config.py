@@ -1,32 +1,38 @@
 """Validated configuration of the libration environments (single and vector).
 
 ``EnvConfig.from_kwargs(**kwargs)`` is what ``gym.make("tether_gym/TetherLibration-v0",
-**kwargs)`` goes through: unknown names are rejected with the list of valid ones and
-every value is range-checked.
+**kwargs)`` goes through: the flat keyword names (the env docstring's Arguments
+table) are mapped onto small validated parts (:data:`FLAT_NAMES`, the one list of
+them), unknown names are rejected with the list of valid ones and every value is
+range-checked by the part that owns it. The parts' values read as attributes of the
+config as well (``config.eccentricity`` is ``config.orbit.eccentricity``).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import difflib
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
+from typing import Any
 
 import numpy as np
 
 from ..params import (
     EARTH_MU,
     ChainParams,
-    Gravity,
     OrbitParams,
     ReelParams,
     as_float_tuple,
+    check_lengths,
+    check_masses,
     check_range,
 )
-from ..physics import TetherChain, kernels
+from ..physics import Scales, TetherChain
 from ..tasks.reward import RewardWeights
+from .layout import OBSERVATION
 
-__all__ = ["EnvConfig", "PAPER_INITIAL_THETA"]
+__all__ = ["EnvConfig", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
+           "PAPER_INITIAL_THETA"]
 
 PAPER_INITIAL_THETA = 0.1
 """theta_1(0) [rad] of the paper's Sec. 4.3 case (the other tethers start at 0)."""
@@ -44,48 +50,190 @@ def _opt_range(name, value, low, high):
 
 
 @dataclass(frozen=True)
-class EnvConfig:
-    """All arguments of the libration environment; see TetherLibrationEnv's docstring."""
+class Reference:
+    """The reference libration theta_d = A sin(w nu) (paper Eq. 8).
 
-    n_bodies: int = 3
-    masses: tuple[float, ...] | None = None
-    initial_lengths: tuple[float, ...] | None = None
-    initial_theta: tuple[float, ...] | None = None
-    initial_nu: float = 0.0
-    eccentricity: float = 0.2
-    semi_latus_rectum: float = 8.52e6
-    mu: float = EARTH_MU
-    total_tether_length: float = 2.0e4
-    gravity: str = "gradient"
+    Parameters
+    ----------
+    amplitude : float
+        A [rad], in [0, 1).
+    frequency : float
+        w [-] (per radian of true anomaly), >= 0.
+    """
+
     amplitude: float = 0.2
     frequency: float = 1.0
+
+    def __post_init__(self) -> None:
+        check_range("amplitude", self.amplitude, 0.0, 1.0, high_open=True)
+        check_range("frequency", self.frequency, 0.0)
+
+
+@dataclass(frozen=True)
+class Episode:
+    """How an episode starts, is stepped and ends.
+
+    Parameters
+    ----------
+    initial_nu : float
+        nu at reset [rad].
+    initial_theta : tuple of float or None
+        theta_i(0) [rad] before randomisation, in (-pi/2, pi/2); None: (0.1, 0, ...).
+    control_step, physics_step : float
+        True anomaly per env step and per RK4 step [rad]; physics_step divides
+        control_step.
+    orbits_per_episode : float
+        Episode length [orbits], in (0, 1000].
+    length_bounds : tuple of float
+        (low, high) allowed l_i [-].
+    """
+
+    initial_nu: float = 0.0
+    initial_theta: tuple[float, ...] | None = None
     control_step: float = 0.025
     physics_step: float = 0.0125
-    max_reel_rate: float = 0.5
-    accel_limit: float | None = 0.01
-    speed_limit: float | None = None
-    reel_time_constant: float = 0.0125
-    length_bounds: tuple[float, float] = (0.05, 1.5)
     orbits_per_episode: float = 3.0
+    length_bounds: tuple[float, float] = (0.05, 1.5)
+
+    def __post_init__(self) -> None:
+        check_range("initial_nu", self.initial_nu)
+        if self.initial_theta is not None:
+            theta0 = as_float_tuple("initial_theta", self.initial_theta)
+            if max(abs(t) for t in theta0) >= 0.5 * math.pi:
+                raise ValueError(f"initial_theta={self.initial_theta!r} must lie in "
+                                 "(-pi/2, pi/2)")
+            object.__setattr__(self, "initial_theta", theta0)
+        check_range("control_step", self.control_step, 0.0, 1.0, low_open=True)
+        check_range("physics_step", self.physics_step, 0.0, self.control_step, low_open=True)
+        ratio = self.control_step / self.physics_step
+        if abs(ratio - round(ratio)) > 1e-9 * ratio:
+            raise ValueError(f"control_step={self.control_step!r} must be a whole multiple of "
+                             f"physics_step={self.physics_step!r} (ratio {ratio:.6g})")
+        check_range("orbits_per_episode", self.orbits_per_episode, 0.0, 1000.0, low_open=True)
+        lo, hi = as_float_tuple("length_bounds", self.length_bounds, 2)
+        if not 0.0 <= lo < hi:
+            raise ValueError(f"length_bounds={self.length_bounds!r} must be (low, high) "
+                             "with 0 <= low < high")
+        object.__setattr__(self, "length_bounds", (lo, hi))
+
+    @property
+    def n_substeps(self) -> int:
+        """RK4 steps per control step."""
+        return int(round(self.control_step / self.physics_step))
+
+    @property
+    def length(self) -> float:
+        """Episode length in true anomaly [rad]."""
+        return 2.0 * math.pi * self.orbits_per_episode
+
+    @property
+    def max_steps(self) -> int:
+        """Control steps per episode (the env truncates itself after this many)."""
+        return int(math.ceil(self.length / self.control_step - 1e-9))
+
+
+@dataclass(frozen=True)
+class Randomisation:
+    """What is drawn per episode and what disturbs it.
+
+    Parameters
+    ----------
+    init_theta_range, init_dtheta_range, init_length_range : float
+        Half-widths of the uniform draws of theta_i(0) [rad], theta_i'(0) [rad/rad]
+        and l_i(0) [-] around their nominal values.
+    eccentricity_range : tuple of float or None
+        (low, high) to draw e per episode.
+    mass_range : float or None
+        Relative half-width to draw each mass, in [0, 1).
+    obs_noise : float
+        Standard deviation of the observation noise on theta, theta', l, l'.
+    disturbance : float
+        Bound of the uniform disturbance d on theta'' (paper Eq. 20) [rad/rad^2].
+    observe_params : bool or None
+        Whether e and M_i close the observation; None: exactly when randomised.
+    """
+
     init_theta_range: float = 0.0
     init_dtheta_range: float = 0.0
     init_length_range: float = 0.0
-    obs_noise: float = 0.0
-    disturbance: float = 0.0
     eccentricity_range: tuple[float, float] | None = None
     mass_range: float | None = None
+    obs_noise: float = 0.0
+    disturbance: float = 0.0
     observe_params: bool | None = None
+
+    def __post_init__(self) -> None:
+        check_range("init_theta_range", self.init_theta_range, 0.0, 0.5 * math.pi)
+        check_range("init_dtheta_range", self.init_dtheta_range, 0.0, 10.0)
+        check_range("init_length_range", self.init_length_range, 0.0)
+        check_range("obs_noise", self.obs_noise, 0.0, 10.0)
+        check_range("disturbance", self.disturbance, 0.0, 100.0)
+        object.__setattr__(self, "eccentricity_range",
+                           _opt_range("eccentricity_range", self.eccentricity_range, 0.0, 0.99))
+        if self.mass_range is not None:
+            check_range("mass_range", self.mass_range, 0.0, 1.0, high_open=True)
+        if self.observe_params is not None and not isinstance(self.observe_params, bool):
+            raise TypeError(f"observe_params must be True, False or None, got "
+                            f"{self.observe_params!r}")
+
+    @property
+    def randomised(self) -> bool:
+        """True when e or the masses are drawn per episode."""
+        return self.eccentricity_range is not None or self.mass_range is not None
+
+
+_PARTS: dict[str, tuple[type, dict[str, str]]] = {
+    # part: (class, {flat keyword: field of the part})
+    "orbit": (OrbitParams, {"eccentricity": "eccentricity",
+                            "semi_latus_rectum": "semi_latus_rectum", "mu": "mu"}),
+    "chain": (ChainParams, {"masses": "masses", "initial_lengths": "initial_lengths",
+                            "total_tether_length": "total_tether_length",
+                            "gravity": "gravity"}),
+    "reels": (ReelParams, {"accel_limit": "accel_limit", "speed_limit": "speed_limit",
+                           "reel_time_constant": "time_constant",
+                           "max_reel_rate": "max_rate"}),
+    "reference": (Reference, {"amplitude": "amplitude", "frequency": "frequency"}),
+    "episode": (Episode, {"initial_nu": "initial_nu", "initial_theta": "initial_theta",
+                          "control_step": "control_step", "physics_step": "physics_step",
+                          "orbits_per_episode": "orbits_per_episode",
+                          "length_bounds": "length_bounds"}),
+    "randomisation": (Randomisation, {f.name: f.name for f in fields(Randomisation)}),
+}
+FLAT_NAMES: dict[str, tuple[str, str]] = {
+    flat: (part, attr) for part, (_, names) in _PARTS.items() for flat, attr in names.items()}
+"""Flat ``gym.make`` keyword -> (part, field): the one map between the two."""
+
+_DEFAULTS = {"eccentricity": 0.2, "semi_latus_rectum": 8.52e6, "mu": EARTH_MU,
+             "total_tether_length": 2.0e4, "gravity": "gradient"}
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """All arguments of the libration environment, as validated parts.
+
+    Build it with :meth:`from_kwargs` (the flat ``gym.make`` names); see
+    TetherLibrationEnv's docstring for every argument.
+    """
+
+    n_bodies: int = 3
+    orbit: OrbitParams = field(default_factory=OrbitParams)
+    chain: ChainParams = field(default_factory=ChainParams)
+    reels: ReelParams = field(default_factory=ReelParams)
+    reference: Reference = field(default_factory=Reference)
+    episode: Episode = field(default_factory=Episode)
+    randomisation: Randomisation = field(default_factory=Randomisation)
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
     render_mode: str | None = None
 
     # ------------------------------------------------------------------ #
     @classmethod
     def names(cls) -> list[str]:
-        return [f.name for f in dataclasses.fields(cls)]
+        """The flat keyword names, in the Arguments table's order."""
+        return ["n_bodies", *FLAT_NAMES, "reward_weights", "render_mode"]
 
     @classmethod
-    def from_kwargs(cls, **kwargs) -> EnvConfig:
-        """Validate keyword arguments; unknown names raise ValueError listing valid ones."""
+    def from_kwargs(cls, **kwargs: Any) -> EnvConfig:
+        """Validate flat keyword arguments; unknown names raise ValueError listing valid ones."""
         valid = cls.names()
         unknown = [k for k in kwargs if k not in valid]
         if unknown:
@@ -95,77 +243,61 @@ class EnvConfig:
                 hints.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
             raise ValueError(f"unknown argument(s) {', '.join(hints)}; valid arguments: "
                              f"{', '.join(valid)}")
-        return cls(**kwargs)
+        n_bodies = kwargs.get("n_bodies", 3)
+        if isinstance(n_bodies, bool) or not isinstance(n_bodies, (int, np.integer)):
+            raise TypeError(f"n_bodies must be an int, got {type(n_bodies).__name__} "
+                            f"{n_bodies!r}")
+        if n_bodies < 2:
+            raise ValueError(f"n_bodies={n_bodies!r} must be >= 2 (one tether or more)")
+        n = int(n_bodies) - 1
+        given = dict(kwargs)
+        # chain defaults that depend on N
+        if given.get("masses") is None:
+            given["masses"] = (1.0, 2.0) if n == 2 else (1.0,) * n
+        if given.get("initial_lengths") is None:
+            given["initial_lengths"] = (1.0 / n,) * n
+        given["masses"] = check_masses(given["masses"], n)
+        given["initial_lengths"] = check_lengths("initial_lengths", given["initial_lengths"], n)
+        if given.get("initial_theta") is None:
+            given["initial_theta"] = (PAPER_INITIAL_THETA,) + (0.0,) * (n - 1)
+        given["initial_theta"] = as_float_tuple("initial_theta", given["initial_theta"], n)
+        parts = {}
+        for part, (klass, names) in _PARTS.items():
+            values = {attr: given[flat] if flat in given else _DEFAULTS.get(flat)
+                      for flat, attr in names.items()
+                      if flat in given or flat in _DEFAULTS}
+            parts[part] = klass(**values)
+        config = cls(n_bodies=int(n_bodies), **parts,
+                     reward_weights=RewardWeights.from_dict(kwargs.get("reward_weights")),
+                     render_mode=kwargs.get("render_mode"))
+        return config
 
-    def __post_init__(self) -> None:  # noqa: C901 - a flat list of checks
-        if isinstance(self.n_bodies, bool) or not isinstance(self.n_bodies, (int, np.integer)):
-            raise TypeError(f"n_bodies must be an int, got {type(self.n_bodies).__name__} "
-                            f"{self.n_bodies!r}")
-        if self.n_bodies < 2:
-            raise ValueError(f"n_bodies={self.n_bodies!r} must be >= 2 (one tether or more)")
-        n = int(self.n_bodies) - 1
-        set_ = object.__setattr__
-        set_(self, "n_bodies", int(self.n_bodies))
-        masses = self.masses if self.masses is not None else ((1.0, 2.0) if n == 2 else (1.0,) * n)
-        lengths = self.initial_lengths if self.initial_lengths is not None else (1.0 / n,) * n
-        theta0 = (self.initial_theta if self.initial_theta is not None
-                  else (PAPER_INITIAL_THETA,) + (0.0,) * (n - 1))
-        set_(self, "masses", as_float_tuple("masses", masses, n))
-        set_(self, "initial_lengths", as_float_tuple("initial_lengths", lengths, n))
-        set_(self, "initial_theta", as_float_tuple("initial_theta", theta0, n))
-        if min(self.masses) <= 0:
-            raise ValueError(f"masses={self.masses!r} must all be > 0")
-        if min(self.initial_lengths) <= 0:
-            raise ValueError(f"initial_lengths={self.initial_lengths!r} must all be > 0")
-        if max(abs(t) for t in self.initial_theta) >= 0.5 * math.pi:
-            raise ValueError(f"initial_theta={self.initial_theta!r} must lie in (-pi/2, pi/2)")
-        check_range("initial_nu", self.initial_nu)
-        # the physical parameter objects validate e, p, mu, L0, gravity, limits
-        set_(self, "gravity", Gravity.parse(self.gravity).value)
-        self.orbit  # noqa: B018 - validates
-        self.chain  # noqa: B018
-        self.reel  # noqa: B018
-        check_range("amplitude", self.amplitude, 0.0, 1.0, high_open=True)
-        check_range("frequency", self.frequency, 0.0)
-        check_range("control_step", self.control_step, 0.0, 1.0, low_open=True)
-        check_range("physics_step", self.physics_step, 0.0, self.control_step, low_open=True)
-        ratio = self.control_step / self.physics_step
-        if abs(ratio - round(ratio)) > 1e-9 * ratio:
-            raise ValueError(f"control_step={self.control_step!r} must be a whole multiple of "
-                             f"physics_step={self.physics_step!r} (ratio {ratio:.6g})")
-        if self.reel_time_constant < 0.5 * self.physics_step:
-            raise ValueError(f"reel_time_constant={self.reel_time_constant!r} must be >= "
-                             f"physics_step / 2 = {0.5 * self.physics_step!r} for a stable "
-                             "RK4 reel response")
-        check_range("max_reel_rate", self.max_reel_rate, 0.0, 10.0, low_open=True)
-        lo, hi = as_float_tuple("length_bounds", self.length_bounds, 2)
-        if not 0.0 <= lo < hi:
-            raise ValueError(f"length_bounds={self.length_bounds!r} must be (low, high) "
-                             "with 0 <= low < high")
-        if not all(lo < l0 < hi for l0 in self.initial_lengths):
-            raise ValueError(f"initial_lengths={self.initial_lengths!r} must lie inside "
+    def __post_init__(self) -> None:
+        if self.chain.n_tethers != self.n_bodies - 1:
+            raise ValueError(f"n_bodies={self.n_bodies!r} needs {self.n_bodies - 1} masses, got "
+                             f"masses={self.chain.masses!r}")
+        lo, hi = self.episode.length_bounds
+        lengths = self.chain.initial_lengths
+        if not all(lo < l0 < hi for l0 in lengths):
+            raise ValueError(f"initial_lengths={lengths!r} must lie inside "
                              f"length_bounds={(lo, hi)!r}")
-        set_(self, "length_bounds", (lo, hi))
-        check_range("orbits_per_episode", self.orbits_per_episode, 0.0, 1000.0, low_open=True)
-        check_range("init_theta_range", self.init_theta_range, 0.0, 0.5 * math.pi)
-        check_range("init_dtheta_range", self.init_dtheta_range, 0.0, 10.0)
-        check_range("init_length_range", self.init_length_range, 0.0, min(self.initial_lengths),
-                    high_open=True)
-        check_range("obs_noise", self.obs_noise, 0.0, 10.0)
-        check_range("disturbance", self.disturbance, 0.0, 100.0)
-        set_(self, "eccentricity_range", _opt_range("eccentricity_range",
-                                                    self.eccentricity_range, 0.0, 0.99))
-        if self.mass_range is not None:
-            check_range("mass_range", self.mass_range, 0.0, 1.0, high_open=True)
-        if self.observe_params is not None and not isinstance(self.observe_params, bool):
-            raise TypeError(f"observe_params must be True, False or None, got "
-                            f"{self.observe_params!r}")
-        set_(self, "reward_weights", RewardWeights.from_dict(
-            self.reward_weights if not isinstance(self.reward_weights, RewardWeights)
-            else dataclasses.asdict(self.reward_weights)))
+        check_range("init_length_range", self.randomisation.init_length_range, 0.0,
+                    min(lengths), high_open=True)
+        if self.reels.time_constant < 0.5 * self.episode.physics_step:
+            raise ValueError(f"reel_time_constant={self.reels.time_constant!r} must be >= "
+                             f"physics_step / 2 = {0.5 * self.episode.physics_step!r} for a "
+                             "stable RK4 reel response")
         if self.render_mode not in (None, "rgb_array", "human"):
             raise ValueError(f"render_mode={self.render_mode!r} must be None, 'rgb_array' "
                              "or 'human'")
+
+    def __getattr__(self, name: str) -> Any:
+        """Flat names read through to their part (``config.eccentricity``)."""
+        try:
+            part, attr = FLAT_NAMES[name]
+        except KeyError:
+            raise AttributeError(f"{type(self).__name__} has no attribute {name!r}") from None
+        return getattr(object.__getattribute__(self, part), attr)
 
     # ------------------------------------------------------------------ #
     @property
@@ -173,42 +305,34 @@ class EnvConfig:
         return self.n_bodies - 1
 
     @property
-    def orbit(self) -> OrbitParams:
-        return OrbitParams(self.eccentricity, self.semi_latus_rectum, self.mu)
-
-    @property
-    def chain(self) -> ChainParams:
-        return ChainParams(self.masses, self.initial_lengths, self.total_tether_length,
-                           self.gravity)
-
-    @property
-    def reel(self) -> ReelParams:
-        return ReelParams(self.accel_limit, self.speed_limit, self.reel_time_constant)
+    def scales(self) -> Scales:
+        """SI <-> dimensionless conversions of this configuration."""
+        return Scales(self.orbit, self.chain.total_tether_length)
 
     @property
     def model(self) -> TetherChain:
         """The chain with the configured (nominal) e, masses and gravity model."""
-        return TetherChain(self.masses, self.eccentricity, self.gravity,
-                           self.total_tether_length / self.semi_latus_rectum)
+        return TetherChain(self.chain.masses, self.orbit.eccentricity, self.chain.gravity,
+                           self.scales.length_ratio)
 
     @property
     def n_substeps(self) -> int:
-        return int(round(self.control_step / self.physics_step))
+        return self.episode.n_substeps
 
     @property
     def episode_length(self) -> float:
         """Episode length in true anomaly [rad]."""
-        return 2.0 * math.pi * self.orbits_per_episode
+        return self.episode.length
 
     @property
     def max_episode_steps(self) -> int:
         """Control steps per episode (the env truncates itself after this many)."""
-        return int(math.ceil(self.episode_length / self.control_step - 1e-9))
+        return self.episode.max_steps
 
     @property
     def randomised(self) -> bool:
-        """True when e or the masses are drawn per episode (they enter the observation)."""
-        return self.eccentricity_range is not None or self.mass_range is not None
+        """True when e or the masses are drawn per episode."""
+        return self.randomisation.randomised
 
     @property
     def with_params(self) -> bool:
@@ -217,55 +341,20 @@ class EnvConfig:
         ``observe_params`` if given, else :attr:`randomised`. False with randomisation
         trains a policy that must be robust to parameters it cannot see.
         """
-        return self.randomised if self.observe_params is None else self.observe_params
+        observe = self.randomisation.observe_params
+        return self.randomised if observe is None else observe
 
     @property
     def obs_dim(self) -> int:
-        n = self.n_tethers
-        return 2 + 4 * n + 2 + ((1 + n) if self.with_params else 0)
+        return OBSERVATION.size(self.n_tethers, params=self.with_params)
 
-    @property
-    def rate_scale(self) -> float:
-        """n = sqrt(mu / p^3) [rad/s]."""
-        return self.orbit.rate_scale
-
-    @property
-    def accel_scale(self) -> float:
-        """L0 n^2 [m/s^2]: physical reel acceleration per unit of k^4 l'' - 2 e s k^3 l'."""
-        return self.total_tether_length * self.rate_scale**2
-
-    def param_row(self, eccentricity: float, masses) -> np.ndarray:
-        """Kernel parameter row for given e and subsatellite masses."""
-        return self.param_rows(np.array([eccentricity], dtype=float),
-                               np.asarray(masses, dtype=float)[None, :])[0]
-
-    def param_rows(self, eccentricity: np.ndarray, masses: np.ndarray) -> np.ndarray:
-        """Kernel parameter rows (B, 6+n) for e of shape (B,) and masses of shape (B, n).
-
-        The layout is :func:`tether_gym.physics.kernels.pack_params`'s, with the tail
-        mass fractions Mt_j = sum_{i>=j} M_i / sum_i M_i of each row; masses of shape
-        (n,) are shared by every row.
-        """
-        eccentricity = np.asarray(eccentricity, dtype=float)
-        m = np.asarray(masses, dtype=float)
-        m = np.broadcast_to(m, eccentricity.shape + m.shape[-1:])
-        frac = m / m.sum(axis=-1, keepdims=True)
-        tail = np.cumsum(frac[:, ::-1], axis=-1)[:, ::-1]
-        grav = (kernels.GRAVITY_FULL if self.gravity == Gravity.FULL.value
-                else kernels.GRAVITY_GRADIENT)
-        a_bound = math.inf if self.accel_limit is None else self.accel_limit / self.accel_scale
-        v_bound = (math.inf if self.speed_limit is None
-                   else self.speed_limit / (self.total_tether_length * self.rate_scale))
-        head = kernels.pack_params(0.0, (), grav,
-                                   self.total_tether_length / self.semi_latus_rectum,
-                                   a_bound, v_bound, self.reel_time_constant)
-        rows = np.empty((m.shape[0], kernels.P_TAIL + m.shape[1]))
-        rows[:, :kernels.P_TAIL] = head
-        rows[:, kernels.P_ECC] = eccentricity
-        rows[:, kernels.P_TAIL:] = tail
-        return rows
+    def param_rows(self, eccentricity, masses) -> np.ndarray:
+        """Kernel parameter rows for e of shape (...,) and masses of shape (..., n)."""
+        return self.scales.param_rows(eccentricity, masses, self.chain.gravity, self.reels)
 
     @property
     def accel_reference(self) -> float:
         """a_ref / (L0 n^2) [-]: the accel limit (or 0.01 m/s^2) made dimensionless."""
-        return (0.01 if self.accel_limit is None else self.accel_limit) / self.accel_scale
+        limit = self.reels.accel_limit
+        return self.scales.accel_bound(0.01 if limit is None else limit)
+

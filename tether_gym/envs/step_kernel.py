@@ -1,267 +1,227 @@
 """One compiled control step for a batch of environments: physics, task, observation.
 
 Both :class:`~tether_gym.envs.TetherLibrationEnv` (a batch of one) and
-:class:`~tether_gym.envs.vector.TetherLibrationVectorEnv` step through
-:func:`_step_row` (:func:`step_rows` over the listed rows, :func:`step_rows_parallel`
-over them on numba's threads), so their trajectories are identical for the same
-inputs; :func:`start_rows` finishes their resets. Each row's observation and
-``info`` entries are written by :func:`write_outputs` in the same compiled loop.
-The loops are compiled without reference counting (:mod:`tether_gym.physics.jit`),
-so their scratch comes from :func:`make_row_work`.
-
-Observation layout (float32), n = N-1 tethers:
-``[sin nu, cos nu, theta (n), theta' (n), l (n), l' (n), theta_d, theta_d'``
-``(, e, M_1..M_n when EnvConfig.with_params)]``.
+:class:`~tether_gym.envs.vector.TetherLibrationVectorEnv` step and reset through
+:func:`step_rows`, so their trajectories are identical for the same inputs. For each
+listed row it advances the chain (:func:`tether_gym.physics.kernels.advance_one`),
+then computes the reward (:mod:`tether_gym.tasks.reward`), the failure code
+(:mod:`tether_gym.tasks.termination`), the observation and the ``info`` entries
+(:mod:`tether_gym.envs.layout`). The loop is compiled without reference counting
+(:mod:`tether_gym.physics.jit`) and releases the GIL, so threads can run disjoint
+rows at once; every array it touches comes from the caller: the batch's
+:class:`Rows`, the constant :class:`StepConfig` and one :class:`RowWork` per thread.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
-from numba import njit, prange
+from numba import njit
 
 from ..physics import kernels
 from ..physics.jit import INLINE, KERNEL, LOOP
-from ..tasks.reward import reward_terms
+from ..physics.layout import at
+from ..physics.orbit import reel_accel
+from ..physics.state import P, S, mass_fraction
+from ..tasks.reference import desired_libration_jit
+from ..tasks.reward import PENALTIES, RewardParams, penalty_terms, reward_terms
 from ..tasks.termination import failure_code
+from .layout import I, O
 
-__all__ = ["step_rows", "step_rows_parallel", "start_rows", "write_outputs", "anomaly_terms",
-           "make_row_work",
-           "INFO_SCALARS", "INFO_VECTORS", "N_COMPONENTS"]
-
-N_COMPONENTS = 5
+__all__ = ["StepConfig", "Rows", "RowWork", "make_row_work", "step_rows"]
 
 
-INFO_SCALARS = ("nu", "theta_ref", "dtheta_ref", "eccentricity")
-"""Per-row floats of the ``info`` buffers, followed by the reward components."""
+class StepConfig(NamedTuple):
+    """Constants of one batch (from its :class:`~tether_gym.envs.config.EnvConfig`)."""
 
-INFO_VECTORS = ("theta", "dtheta", "length", "dlength", "ddlength", "tension", "tension_min",
-                "reel_accel")
-"""Per-row (n,) arrays of the ``info`` buffers."""
-
-
-@njit(**INLINE)
-def anomaly_terms(nu, amplitude, frequency):
-    """(sin nu, cos nu, theta_d, theta_d') with theta_d = A sin(w nu) [rad] (paper Eq. 8)."""
-    phase = frequency * nu
-    return (math.sin(nu), math.cos(nu), amplitude * math.sin(phase),
-            amplitude * frequency * math.cos(phase))
-
-
-@njit(**INLINE)
-def write_outputs(b, nu, sn, cn, ref, dref, y, par, with_params, noise, obs, deriv_end,
-                  tension_end, tension_min, components, accel_scale, scalars, vectors):
-    """Row b's observation and ``info`` entries, from its state at true anomaly nu.
-
-    ``sn, cn, ref, dref`` are :func:`anomaly_terms` of nu, computed once by the
-    caller. The observation row (layout in the module docstring) gets ``noise[b]``
-    added to [theta, theta', l, l'].
-    ``scalars[:, b]`` (len(INFO_SCALARS) + N_COMPONENTS entries) and ``vectors[:, b]``
-    (len(INFO_VECTORS), n) receive the info entries (see ChainBatch.info) in the
-    orders of INFO_SCALARS (then the reward components) and INFO_VECTORS; the
-    derived one is the reels' physical acceleration reel_accel = L0 n^2 (k^4 l'' -
-    2 e sin(nu) k^3 l') [m/s^2], k = 1 + e cos(nu), with powers from ``math.pow``
-    (libm), as numpy's scalar ``**`` does.
-    """
-    m = y.shape[1]
-    n = m // 4
-    out = obs[b]
-    out[0] = sn
-    out[1] = cn
-    for i in range(m):
-        out[2 + i] = y[b, i] + noise[b, i]
-    out[2 + m] = ref
-    out[3 + m] = dref
-    ecc = par[kernels.P_ECC]
-    if with_params:
-        out[4 + m] = ecc
-        for j in range(n):
-            out[5 + m + j] = (par[kernels.P_TAIL + j]
-                              - (par[kernels.P_TAIL + j + 1] if j + 1 < n else 0.0))
-    scalars[0, b] = nu
-    scalars[1, b] = ref
-    scalars[2, b] = dref
-    scalars[3, b] = ecc
-    for c in range(components.shape[1]):
-        scalars[4 + c, b] = components[b, c]
-    k = 1.0 + ecc * cn
-    k4 = math.pow(k, 4.0)
-    coriolis = 2.0 * ecc * sn * math.pow(k, 3.0)
-    for j in range(n):
-        vectors[0, b, j] = y[b, j]
-        vectors[1, b, j] = y[b, n + j]
-        vectors[2, b, j] = y[b, 2 * n + j]
-        vectors[3, b, j] = y[b, 3 * n + j]
-        vectors[4, b, j] = deriv_end[b, 3 * n + j]
-        vectors[5, b, j] = tension_end[b, j]
-        vectors[6, b, j] = tension_min[b, j]
-        vectors[7, b, j] = accel_scale * (k4 * deriv_end[b, 3 * n + j]
-                                          - coriolis * y[b, 3 * n + j])
+    max_reel_rate: float          # l'_cmd at |action| = 1 [-]
+    substeps: kernels.Substeps    # RK4 steps per control step
+    amplitude: float              # A [rad] of theta_d = A sin(w nu)
+    frequency: float              # w [-]
+    length_min: float             # length bounds [-]
+    length_max: float
+    accel_ref: float              # a_ref / (L0 n^2) [-] of the reward's acceleration term
+    accel_scale: float            # L0 n^2 [m/s^2] of info["reel_accel"]
+    with_params: bool             # e and M_i close the observation
+    reward: RewardParams
+    length_nominal: np.ndarray    # (n,) l_i,nom [-] of the length penalty
 
 
-@njit(**LOOP)
-def step_rows(rows, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise,
-              obs, reward, components, failure, tension_min, tension_end, deriv_end, accel_scale,
-              info_s, info_v, work):
-    """Advance the rows listed in ``rows`` (int64) by one control step, in place.
+class Rows(NamedTuple):
+    """The batch's per-row arrays (B rows, n tethers, m = 4n)."""
 
-    Rows not listed are left untouched.
-
-    Parameters
-    ----------
-    nu, y : (B,), (B, 4n)  true anomaly [rad] and state rows, updated.
-    action : (B, n)  normalised reel-rate commands, clipped to [-1, 1];
-        l'_cmd = action * max_reel_rate.
-    dist : (B, n)  disturbance on theta'' held over the step (paper Eq. 20).
-    par : (B, 6+n) or (1, 6+n)  kernel parameter rows.
-    weights : tuple  RewardWeights.as_tuple().
-    length_nominal : (n,)  nominal tether lengths l_i,nom [-] of the length penalty.
-    noise : (B, 4n)  observation noise.
-    obs, reward, components, failure, tension_min, tension_end, deriv_end : outputs.
-    accel_scale : float  L0 n^2 [m/s^2] of the info entry reel_accel.
-    info_s, info_v : the info buffers, written by :func:`write_outputs`.
-    work : tuple  scratch from :func:`make_row_work` (lane 0 is used).
-
-    A row whose state turns non-finite keeps its previous state (so nothing non-finite
-    reaches the observation) and gets failure code 1 and reward 0 (the lowest).
-    """
-    lane = _row_lane(work, 0)
-    for i in range(rows.shape[0]):
-        _step_row(rows[i], nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude,
-                  frequency, weights, length_min, length_max, accel_ref, length_nominal,
-                  with_params, noise, obs, reward, components, failure, tension_min,
-                  tension_end, deriv_end, accel_scale, info_s, info_v, lane)
+    nu: np.ndarray           # (B,) true anomaly [rad]
+    y: np.ndarray            # (B, m) state rows (STATE layout)
+    par: np.ndarray          # (B, P) parameter rows (PARAMS layout)
+    disturbance: np.ndarray  # (B, n) d on theta'' held over the step
+    noise: np.ndarray        # (B, m) observation noise on the state entries
+    obs: np.ndarray          # (B, obs_dim) float32 observations (OBSERVATION layout)
+    reward: np.ndarray       # (B,)
+    components: np.ndarray   # (B, 1 + len(PENALTIES))
+    failure: np.ndarray      # (B,) int64 Failure codes
+    tension_min: np.ndarray  # (B, n)
+    tension: np.ndarray      # (B, n) T^ at the end of the step
+    derivative: np.ndarray   # (B, m) dy/dnu at the end of the step
+    info_s: np.ndarray       # (scalar entries, B) info buffers (INFO layout)
+    info_v: np.ndarray       # (vector entries, B, n)
 
 
-@njit(parallel=True, **LOOP)
-def step_rows_parallel(rows, n_chunks, nu, y, action, max_reel_rate, dist, par, h, n_sub,
-                       amplitude, frequency, weights, length_min, length_max, accel_ref,
-                       length_nominal, with_params, noise, obs, reward, components, failure,
-                       tension_min, tension_end, deriv_end, accel_scale, info_s, info_v,
-              work):
-    """:func:`step_rows` on numba's threads: ``n_chunks`` contiguous chunks of ``rows``.
+class RowWork(NamedTuple):
+    """Scratch of one thread."""
 
-    Chunk c uses lane c of ``work`` (which needs at least n_chunks lanes) and every
-    row runs the same :func:`_step_row`, so the results are bitwise those of
-    :func:`step_rows`.
-    """
-    count = rows.shape[0]
-    for c in prange(n_chunks):
-        lane = _row_lane(work, c)
-        for i in range(c * count // n_chunks, (c + 1) * count // n_chunks):
-            _step_row(rows[i], nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude,
-                      frequency, weights, length_min, length_max, accel_ref, length_nominal,
-                      with_params, noise, obs, reward, components, failure, tension_min,
-                      tension_end, deriv_end, accel_scale, info_s, info_v, lane)
+    physics: kernels.Scratch
+    command: np.ndarray   # (n,) l'_cmd [-]
+    action: np.ndarray    # (n,) clipped action
+    zero: np.ndarray      # (n,) zeros (no disturbance at reset)
+    accel: np.ndarray     # (n,) L_ddot / a_ref
+    previous: np.ndarray  # (m,) state before the step
+    penalty: np.ndarray   # (len(PENALTIES),) per-term sums
 
 
 @njit(**KERNEL)
-def make_row_work(n, lanes):
-    """Scratch of :func:`_step_row` for n tethers, one set per lane (thread chunk).
+def make_row_work(n, n_penalties):
+    """Fresh :class:`RowWork` for n tethers."""
+    return RowWork(kernels.make_scratch(n), np.empty(n), np.empty(n), np.zeros(n), np.empty(n),
+                   np.empty(4 * n), np.empty(n_penalties))
 
-    A flat tuple (a parallel loop cannot take nested tuples): the arrays of
-    :func:`tether_gym.physics.kernels.make_scratch`, then (lanes, 3, n) for the
-    command, the clipped action and the reel acceleration, and (lanes, 4n) for the
-    previous state.
+
+def new_row_work(n: int) -> RowWork:
+    """:func:`make_row_work` for the declared reward terms."""
+    return make_row_work(n, len(PENALTIES))
+
+
+@njit(**INLINE)
+def write_outputs(b, rows, cfg):
+    """Row b's observation and ``info`` entries from its state (layouts in envs.layout).
+
+    The observation gets ``rows.noise[b]`` added to its state entries. The derived
+    info entry is the reels' physical acceleration L0 n^2 (k^4 l'' - 2 e sin(nu) k^3 l')
+    [m/s^2] (:func:`tether_gym.physics.orbit.reel_accel`).
     """
-    S, R, V, tens, K = kernels.make_scratch(n, lanes)
-    slots = lanes * kernels.LANE_STRIDE
-    return S, R, V, tens, K, np.empty((slots, 3, n)), np.empty((slots, 4 * n))
+    y = rows.y[b]
+    n = y.shape[0] // 4
+    nu = rows.nu[b]
+    par = rows.par[b] if rows.par.shape[0] > 1 else rows.par[0]
+    ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
+    sn = math.sin(nu)
+    cn = math.cos(nu)
+    ecc = par[at(P.eccentricity, n)]
+    noise = rows.noise[b]
+    out = rows.obs[b]
+    out[at(O.sin_nu, n)] = sn
+    out[at(O.cos_nu, n)] = cn
+    for j in range(n):
+        for field, state in ((O.theta, S.theta), (O.dtheta, S.dtheta), (O.length, S.length),
+                             (O.dlength, S.dlength)):
+            i = at(state, n) + j
+            out[at(field, n) + j] = y[i] + noise[i]
+    out[at(O.theta_ref, n)] = ref
+    out[at(O.dtheta_ref, n)] = dref
+    if cfg.with_params:
+        out[at(O.eccentricity, n)] = ecc
+        for j in range(n):
+            out[at(O.mass_fractions, n) + j] = mass_fraction(par, j, n)
+    s = rows.info_s
+    s[I.nu[0], b] = nu
+    s[I.theta_ref[0], b] = ref
+    s[I.dtheta_ref[0], b] = dref
+    s[I.eccentricity[0], b] = ecc
+    s[I.failure[0], b] = rows.failure[b]
+    for c in range(rows.components.shape[1]):
+        s[I.reward_tracking[0] + c, b] = rows.components[b, c]
+    v = rows.info_v
+    k = 1.0 + ecc * cn
+    der = rows.derivative[b]
+    dl = at(S.dlength, n)
+    for j in range(n):
+        v[I.theta[1], b, j] = y[at(S.theta, n) + j]
+        v[I.dtheta[1], b, j] = y[at(S.dtheta, n) + j]
+        v[I.length[1], b, j] = y[at(S.length, n) + j]
+        v[I.dlength[1], b, j] = y[dl + j]
+        v[I.ddlength[1], b, j] = der[dl + j]
+        v[I.tension[1], b, j] = rows.tension[b, j]
+        v[I.tension_min[1], b, j] = rows.tension_min[b, j]
+        v[I.reel_accel[1], b, j] = cfg.accel_scale * reel_accel(k, sn, ecc, y[dl + j],
+                                                                der[dl + j])
 
 
 @njit(**INLINE)
-def _row_lane(work, c):
-    """Lane c of :func:`make_row_work`: (physics scratch, cmd, act, accel, prev)."""
-    S, R, V, tens, K, small, prev = work
-    i = c * kernels.LANE_STRIDE
-    return (kernels.scratch_lane((S, R, V, tens, K), c), small[i, 0], small[i, 1],
-            small[i, 2], prev[i])
+def _task(b, cfg, work, rows):
+    """Failure code, reward and its components of row b after its step."""
+    y = rows.y[b]
+    n = y.shape[0] // 4
+    par = rows.par[b] if rows.par.shape[0] > 1 else rows.par[0]
+    code = failure_code(y, rows.tension_min[b], cfg.length_min, cfg.length_max)
+    rows.failure[b] = code
+    if code == 1:  # non-finite: keep the last finite state, lowest reward
+        for i in range(y.shape[0]):
+            y[i] = work.previous[i]
+        for c in range(rows.components.shape[1]):
+            rows.components[b, c] = 0.0
+        rows.reward[b] = 0.0
+        for j in range(n):
+            if not math.isfinite(rows.tension[b, j]):
+                rows.tension[b, j] = 0.0
+            if not math.isfinite(rows.tension_min[b, j]):
+                rows.tension_min[b, j] = 0.0
+        for i in range(y.shape[0]):
+            if not math.isfinite(rows.derivative[b, i]):
+                rows.derivative[b, i] = 0.0
+        return
+    nu = rows.nu[b]
+    ecc = par[at(P.eccentricity, n)]
+    k = 1.0 + ecc * math.cos(nu)
+    sn = math.sin(nu)
+    dl = at(S.dlength, n)
+    for j in range(n):
+        work.accel[j] = reel_accel(k, sn, ecc, y[dl + j], rows.derivative[b, dl + j]) \
+            / cfg.accel_ref
+    ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
+    penalty_terms(y, n, work.action, work.accel, rows.tension_min[b], cfg.length_nominal,
+                  cfg.reward, work.penalty)
+    rows.reward[b] = reward_terms(y, n, ref, dref, cfg.reward, work.penalty,
+                                  rows.components[b])
 
 
-@njit(**INLINE)
-def _step_row(b, nu, y, action, max_reel_rate, dist, par, h, n_sub, amplitude, frequency,
-              weights, length_min, length_max, accel_ref, length_nominal, with_params, noise, obs,
-              reward,
-              components, failure, tension_min, tension_end, deriv_end, accel_scale, info_s,
-              info_v, work):
-    """One control step of row b (the body shared by every batched entry point)."""
-    scratch, cmd, act, accel, prev = work
-    m = y.shape[1]
+@njit(nogil=True, **LOOP)
+def step_rows(index, action, rows, cfg, work, reset):
+    """One control step of the rows listed in ``index`` (int64), in place; others untouched.
+
+    ``action`` (B, n) holds the normalised reel-rate commands, clipped to [-1, 1]
+    (l'_cmd = action * max_reel_rate). With ``reset`` True the listed rows, whose
+    ``nu``, ``y``, ``par`` and ``noise`` were just set, are not stepped: they get
+    dy/dnu and T^ at their initial state with the reels holding their rate (the state
+    the first step starts from), and their observation and info entries; their
+    reward components must be zero.
+
+    A row whose state turns non-finite keeps its previous state (so nothing
+    non-finite reaches the observation) and gets failure code 1 and reward 0.
+    """
+    m = rows.y.shape[1]
     n = m // 4
-    shared = par.shape[0] == 1
-    pb = par[0] if shared else par[b]
-    yb = y[b]
-    for i in range(m):
-        prev[i] = yb[i]
-    for j in range(n):
-        a = min(max(action[b, j], -1.0), 1.0)
-        act[j] = a
-        cmd[j] = a * max_reel_rate
-    nu_new = kernels.advance_one(nu[b], yb, cmd, dist[b], pb, h, n_sub, scratch,
-                                 tension_min[b], deriv_end[b], tension_end[b])
-    nu[b] = nu_new
-    sn, cn, ref, dref = anomaly_terms(nu_new, amplitude, frequency)
-    code = failure_code(yb, tension_min[b], length_min, length_max)
-    failure[b] = code
-    if code == 1:
-        for i in range(m):
-            yb[i] = prev[i]
-        for c in range(components.shape[1]):
-            components[b, c] = 0.0
-        reward[b] = 0.0
-        for j in range(n):
-            if not math.isfinite(tension_end[b, j]):
-                tension_end[b, j] = 0.0
-            if not math.isfinite(tension_min[b, j]):
-                tension_min[b, j] = 0.0
-        for i in range(m):
-            if not math.isfinite(deriv_end[b, i]):
-                deriv_end[b, i] = 0.0
-    else:
-        ecc = pb[kernels.P_ECC]
-        k = 1.0 + ecc * cn
-        k3 = k * k * k
-        cor = 2.0 * ecc * sn * k3
-        for j in range(n):
-            accel[j] = (k3 * k * deriv_end[b, 3 * n + j] - cor * yb[3 * n + j]) / accel_ref
-        reward[b] = reward_terms(yb[0:n], yb[n:2 * n], yb[2 * n:3 * n], ref, dref, act,
-                                 accel, tension_min[b], length_nominal, weights,
-                                 components[b])
-    write_outputs(b, nu_new, sn, cn, ref, dref, y, pb, with_params, noise, obs, deriv_end,
-                  tension_end, tension_min, components, accel_scale, info_s, info_v)
-
-
-@njit(**LOOP)
-def start_rows(rows, nu, y, par, amplitude, frequency, with_params, noise, obs, components,
-               tension_min, tension_end, deriv_end, accel_scale, info_s, info_v, work):
-    """Finish the reset of the listed rows, whose ``nu``, ``y``, ``par`` and ``noise`` are set.
-
-    Each row gets dy/dnu and T^ at its initial state with the reels holding their
-    rate (l'_cmd = l', no disturbance: the state the first step starts from) in
-    ``deriv_end``, ``tension_end`` and ``tension_min``, its observation in ``obs`` and
-    its info entries in ``info_s``, ``info_v`` (:func:`write_outputs`; the reward
-    components must be set). ``work`` is scratch from :func:`make_row_work` (lane 0 is used).
-    """
-    n = y.shape[1] // 4
-    (S, R, V, tens, _, _, _), hold, still, _, _ = _row_lane(work, 0)
-    for j in range(n):
-        still[j] = 0.0
-    shared = par.shape[0] == 1
-    for i in range(rows.shape[0]):
-        b = rows[i]
-        pb = par[0] if shared else par[b]
-        yb = y[b]
-        for j in range(n):
-            hold[j] = yb[3 * n + j]
-        kernels.controlled_rhs_tension(nu[b], yb, (hold, still, pb, S, R, V, tens),
-                                       deriv_end[b])
-        for j in range(n):
-            tension_end[b, j] = tens[j]
-            tension_min[b, j] = tens[j]
-        sn, cn, ref, dref = anomaly_terms(nu[b], amplitude, frequency)
-        write_outputs(b, nu[b], sn, cn, ref, dref, y, pb, with_params, noise, obs, deriv_end,
-                      tension_end, tension_min, components, accel_scale, info_s, info_v)
-
-
+    no_steps = kernels.Substeps(cfg.substeps.h, 0)
+    shared = rows.par.shape[0] == 1
+    for i in range(index.shape[0]):
+        b = index[i]
+        yb = rows.y[b]
+        pb = rows.par[0] if shared else rows.par[b]
+        out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
+        if reset:
+            for j in range(n):
+                work.command[j] = yb[at(S.dlength, n) + j]
+            inputs = kernels.StepInputs(work.command, work.zero)
+            kernels.advance_one(rows.nu[b], yb, inputs, pb, no_steps, work.physics, out)
+        else:
+            for k in range(m):
+                work.previous[k] = yb[k]
+            for j in range(n):
+                a = min(max(action[b, j], -1.0), 1.0)
+                work.action[j] = a
+                work.command[j] = a * cfg.max_reel_rate
+            inputs = kernels.StepInputs(work.command, rows.disturbance[b])
+            rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, cfg.substeps,
+                                             work.physics, out)
+            _task(b, cfg, work, rows)
+        write_outputs(b, rows, cfg)

@@ -9,18 +9,24 @@ import numpy as np
 from gymnasium import spaces
 
 from ..physics import TetherChain
+from ..physics.layout import at
+from ..physics.state import P
 from .batch import ChainBatch
 from .config import EnvConfig
+from .layout import observation_bounds
 
 __all__ = ["TetherLibrationEnv"]
 
 
 def observation_space(config: EnvConfig) -> spaces.Box:
-    """Box of the observation layout (see the env docstring)."""
-    low = np.full(config.obs_dim, -np.inf, dtype=np.float32)
-    high = np.full(config.obs_dim, np.inf, dtype=np.float32)
-    low[:2], high[:2] = -1.0, 1.0
+    """Box of the observation layout (:data:`tether_gym.envs.layout.OBSERVATION`)."""
+    low, high = observation_bounds(config.n_tethers, config.with_params)
     return spaces.Box(low, high, dtype=np.float32)
+
+
+def eccentricity_of(batch: ChainBatch, b: int) -> float:
+    """e of row b (it is drawn per episode when randomised)."""
+    return float(batch.par[b, at(P.eccentricity, batch.n)])
 
 
 def action_space(config: EnvConfig) -> spaces.Box:
@@ -34,7 +40,7 @@ def check_action(action, n: int) -> np.ndarray:
         raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
     if not all(map(math.isfinite, a.tolist())):  # faster than np.isfinite for small n
         raise ValueError(f"action={action!r} must be finite (no NaN or inf)")
-    return a.reshape(1, n)
+    return np.ascontiguousarray(a.reshape(1, n))
 
 
 class TetherLibrationEnv(gym.Env):
@@ -227,9 +233,10 @@ class TetherLibrationEnv(gym.Env):
             from .rendering import ChainRenderer
 
             self._renderer = ChainRenderer(self.config, self.render_mode)
-        return self._renderer.draw(self._batch.info(0), float(self._batch.par[0, 0]))
+        return self._renderer.draw(self._batch.info(0), eccentricity_of(self._batch, 0))
 
     def close(self):
+        self._batch.close()
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

@@ -9,6 +9,7 @@ driven the same way.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -20,7 +21,7 @@ from gymnasium.vector.utils import batch_space
 from ..physics import TetherChain
 from .batch import ChainBatch, _check_options
 from .config import EnvConfig
-from .tether_libration import action_space, observation_space
+from .tether_libration import action_space, eccentricity_of, observation_space
 
 __all__ = ["TetherLibrationVectorEnv"]
 
@@ -187,19 +188,16 @@ class TetherLibrationVectorEnv(VectorEnv):
         return self._rngs[i]
 
     def _n_chunks(self, rows: int) -> int:
-        """Chunks for the threaded kernel (a few per thread), 0 for the serial one."""
+        """Threads for the step (one chunk of rows each), 0 for the serial step."""
         if not self.parallel or rows < 2:
             return 0
         if self.parallel == "auto" and rows < PARALLEL_MIN_ENVS:
-            # decide before asking numba: get_num_threads() launches its thread pool,
-            # whose idle OpenMP workers spin and take half a core from the caller
             return 0
-        import numba
-
-        threads = numba.get_num_threads()
-        if self.parallel == "auto" and threads < 2:
+        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
+            os.cpu_count() or 1)
+        if threads < 2:
             return 0
-        return min(4 * threads, rows)
+        return min(threads, rows)
 
     # ------------------------------------------------------------------ #
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -231,7 +229,7 @@ class TetherLibrationVectorEnv(VectorEnv):
                                f"{np.flatnonzero(~self._was_reset).tolist()} were never reset")
         batch = self._batch
         n = self.n_tethers
-        a = np.asarray(actions, dtype=np.float64)
+        a = np.ascontiguousarray(actions, dtype=np.float64)
         if a.shape != (self.num_envs, n):
             raise ValueError(f"actions must have shape ({self.num_envs}, {n}) (num_envs, N-1), "
                              f"got {a.shape}: {actions!r}")
@@ -290,10 +288,11 @@ class TetherLibrationVectorEnv(VectorEnv):
 
             self._renderer = ChainRenderer(self.config, self.render_mode)
         batch = self._batch
-        return tuple(self._renderer.draw(batch.info(i), float(batch.par[i, 0]))
+        return tuple(self._renderer.draw(batch.info(i), eccentricity_of(batch, i))
                      for i in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
+        self._batch.close()
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None

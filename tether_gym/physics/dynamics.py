@@ -1,8 +1,12 @@
-"""The public model of the tethered chain: :class:`TetherChain`.
+"""The public face of the physics: :class:`TetherChain` and :func:`transition`.
 
-The equations themselves live in :mod:`tether_gym.physics.kernels` (one copy, with
-their derivation); this module validates inputs, broadcasts leading axes and calls
-them.
+``TetherChain`` evaluates the chain's equations of motion at given states (theta'',
+tensions, the control-affine split used by model-based controllers);
+:func:`transition` advances states over a step with the reels in the loop, exactly
+as the environments do (python-control's ``dynamics(t, x, u, params)`` /
+Gymnasium FuncEnv's ``transition`` style). The equations themselves live in
+:mod:`tether_gym.physics.kernels` (one copy, with their derivation); this module
+validates inputs, broadcasts leading axes and calls them.
 
 Variables (dimensionless, paper Sec. 2): ``nu`` true anomaly [rad]; ``theta`` [rad]
 libration angle of each tether from the local vertical (pointing to Earth),
@@ -13,12 +17,16 @@ positive when the lower body trails the upper one; ``dtheta`` = d theta / d nu
 
 from __future__ import annotations
 
+import math
+from typing import NamedTuple
+
 import numpy as np
 
-from ..params import Gravity, as_float_tuple, check_range
+from ..params import Gravity, check_masses, check_range
 from . import kernels
+from .state import PARAMS, STATE, mass_fractions, pack_params, tail_masses
 
-__all__ = ["TetherChain"]
+__all__ = ["TetherChain", "Transition", "transition"]
 
 
 class TetherChain:
@@ -45,11 +53,7 @@ class TetherChain:
     """
 
     def __init__(self, masses, eccentricity, gravity="gradient", length_ratio=None):
-        masses = as_float_tuple("masses", masses)
-        if len(masses) < 1:
-            raise ValueError(f"masses={masses!r}: need at least one subsatellite (N >= 2)")
-        if min(masses) <= 0.0:
-            raise ValueError(f"masses={masses!r} must all be > 0")
+        masses = check_masses(masses)
         self.eccentricity = check_range("eccentricity", eccentricity, 0.0, 1.0, high_open=True)
         self.gravity = Gravity.parse(gravity)
         if self.gravity is Gravity.FULL:
@@ -61,17 +65,31 @@ class TetherChain:
             self.length_ratio = (None if length_ratio is None else
                                  check_range("length_ratio", length_ratio, 0.0, 1.0,
                                              low_open=True, high_open=True))
-        total = sum(masses)
-        self.mass_fractions = np.array(masses) / total
+        self.tail_masses = tail_masses(masses)
+        """Mt_j = sum_{i>=j} M_i [-], the mass fraction hanging on tether j."""
+        self.mass_fractions = mass_fractions(masses)
         """M_i = m_i / m_tot [-]."""
-        self.tail_masses = np.cumsum(self.mass_fractions[::-1])[::-1].copy()
-        """sum_{i>=j} M_i [-], the mass hanging on tether j."""
-        self.par = kernels.pack_params(
-            self.eccentricity,
-            self.tail_masses,
-            kernels.GRAVITY_FULL if self.gravity is Gravity.FULL else kernels.GRAVITY_GRADIENT,
-            self.length_ratio or 0.0,
-        )[None, :]
+        self.par = self.param_row()[None, :]
+        """The parameter row (1, P) of the chain without reel limits."""
+
+    def param_row(self, accel_bound: float = math.inf, speed_bound: float = math.inf,
+                  time_constant: float = 1.0) -> np.ndarray:
+        """Parameter row (:data:`~tether_gym.physics.state.PARAMS`) with reel limits.
+
+        Parameters
+        ----------
+        accel_bound, speed_bound : float
+            Reel limits a_max / (L0 n^2) and v_max / (L0 n) [-]
+            (:class:`tether_gym.params.Scales`); inf for none.
+        time_constant : float
+            Reel lag tau [rad], > 0.
+        """
+        check_range("time_constant", time_constant, 0.0, low_open=True)
+        for name, value in (("accel_bound", accel_bound), ("speed_bound", speed_bound)):
+            if not (isinstance(value, (int, float, np.floating)) and value > 0.0):
+                raise ValueError(f"{name}={value!r} must be > 0 (inf for no limit)")
+        return pack_params(self.eccentricity, self.tail_masses, self.gravity,
+                           self.length_ratio or 0.0, accel_bound, speed_bound, time_constant)
 
     @property
     def n_tethers(self) -> int:
@@ -112,7 +130,8 @@ class TetherChain:
                                                              dlength, ddlength)
         ddtheta = np.empty_like(th)
         tension = np.empty_like(th)
-        kernels.accel_batch(nu_f, th, dth, ln, dl, ddl, self.par, ddtheta, tension)
+        kernels.accel_rows(nu_f, _rows(th, dth, ln, dl), ddl, self.par, ddtheta, tension,
+                           kernels.make_scratch(self.n_tethers))
         shape = lead + (self.n_tethers,)
         return ddtheta.reshape(shape), tension.reshape(shape)
 
@@ -144,5 +163,92 @@ class TetherChain:
         f = np.empty_like(th)
         B = np.empty(th.shape + (n,))
         D = np.empty(th.shape + (n,))
-        kernels.affine_batch(nu_f, th, dth, ln, self.par, f, B, D)
+        kernels.affine_rows(nu_f, _rows(th, dth, ln, np.zeros_like(th)), self.par, f, B, D,
+                            kernels.make_scratch(n), np.empty((n, 1 + 2 * n)))
         return (f.reshape(lead + (n,)), B.reshape(lead + (n, n)), D.reshape(lead + (n, n)))
+
+
+def _rows(theta, dtheta, length, dlength) -> np.ndarray:
+    """State rows (B, 4n) in the STATE layout from its fields (B, n) each."""
+    n = theta.shape[1]
+    y = np.empty((theta.shape[0], STATE.size(n)))
+    for name, value in zip(STATE.names, (theta, dtheta, length, dlength), strict=True):
+        y[:, STATE.slices(n)[name]] = value
+    return y
+
+
+class Transition(NamedTuple):
+    """Result of :func:`transition` (leading axes as the inputs')."""
+
+    nu: np.ndarray
+    """True anomaly at the end of the step [rad]."""
+    state: np.ndarray
+    """State rows at the end of the step (STATE layout)."""
+    tension_min: np.ndarray
+    """Smallest T^_i [-] over the RK4 substep boundaries (both ends included)."""
+    tension: np.ndarray
+    """T^_i [-] at the end of the step."""
+    derivative: np.ndarray
+    """dy/dnu at the end of the step under the held command (holds theta'' and l'')."""
+
+
+def transition(nu, state, command, params, h: float, substeps: int = 1,
+               disturbance=None) -> Transition:
+    """Advance chains with their reels by ``substeps`` RK4 steps of ``h`` in true anomaly.
+
+    The reels follow the held command (first-order lag, acceleration and speed
+    limits, :func:`tether_gym.physics.kernels._reel`) inside every RK4 stage, and
+    the disturbance is added to theta'' (paper Eq. 20). This is the same compiled
+    step the environments take.
+
+    Parameters
+    ----------
+    nu : float or ndarray, shape (B,)
+        True anomaly at the start [rad].
+    state : ndarray, shape (4n,) or (B, 4n)
+        State rows ``[theta, theta', l, l']`` (:data:`~tether_gym.physics.state.STATE`).
+    command : ndarray, shape (n,) or (B, n)
+        Commanded reel rates l'_cmd [-], held over the step.
+    params : TetherChain or ndarray, shape (P,) or (B, P)
+        A chain (no reel limits) or parameter rows from :meth:`TetherChain.param_row`
+        or :class:`tether_gym.params.Scales`.
+    h : float
+        RK4 step in true anomaly [rad], >= 0 (the env's ``physics_step``).
+    substeps : int
+        Number of RK4 steps (the env takes control_step / physics_step of them per
+        step), >= 0; 0 evaluates the derivative and tension at the start only.
+    disturbance : ndarray, shape (n,) or (B, n), optional
+        d added to theta'' [rad/rad^2] (zero by default).
+
+    Returns
+    -------
+    Transition
+    """
+    par = params.par if isinstance(params, TetherChain) else np.asarray(params, dtype=float)
+    y = np.array(state, dtype=float, ndmin=2, copy=True)
+    batch, m = y.shape
+    if m % 4:
+        raise ValueError(f"state must have 4n entries per row, got shape {np.shape(state)}")
+    n = m // 4
+    par = np.ascontiguousarray(par.reshape(-1, par.shape[-1]))
+    if par.shape[1] != PARAMS.size(n) or par.shape[0] not in (1, batch):
+        raise ValueError(f"params of shape {par.shape} do not fit {batch} states of {n} "
+                         f"tethers (need (1 or {batch}, {PARAMS.size(n)}))")
+    nu_a = np.array(np.broadcast_to(np.asarray(nu, dtype=float), (batch,)))
+    cmd = np.ascontiguousarray(np.broadcast_to(np.asarray(command, dtype=float), (batch, n)))
+    dist = (np.zeros((batch, n)) if disturbance is None else
+            np.ascontiguousarray(np.broadcast_to(np.asarray(disturbance, dtype=float),
+                                                 (batch, n))))
+    for name, value in (("nu", nu_a), ("state", y), ("command", cmd), ("disturbance", dist)):
+        if not np.all(np.isfinite(value)):
+            raise ValueError(f"{name}={value!r} must be finite (no NaN or inf)")
+    check_range("h", h, 0.0)
+    if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 0:
+        raise ValueError(f"substeps={substeps!r} must be an int >= 0")
+    out = kernels.StepOutputs(np.empty((batch, n)), np.empty((batch, m)), np.empty((batch, n)))
+    kernels.transition_rows(nu_a, y, kernels.StepInputs(cmd, dist), par,
+                            kernels.Substeps(float(h), int(substeps)), out, kernels.make_scratch(n))
+    single = np.ndim(state) == 1
+    pick = (lambda a: a[0]) if single else (lambda a: a)
+    return Transition(pick(nu_a), pick(y), pick(out.tension_min), pick(out.tension),
+                      pick(out.derivative))

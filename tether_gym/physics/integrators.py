@@ -8,12 +8,11 @@ right-hand side; each right-hand side gets its own cached compilation.
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from .jit import LOOP
 
-__all__ = ["make_rk4", "rk4_integrate"]
+__all__ = ["make_rk4"]
 
 
 def make_rk4(fun, compiled=True):
@@ -64,21 +63,3 @@ def make_rk4(fun, compiled=True):
 
     return step if compiled else step.py_func
 
-
-def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
-    """Take ``n_steps`` RK4 steps with a stepper from :func:`make_rk4` (pure Python loop).
-
-    Returns the array of states, shape (n_steps + 1, len(y0)). Meant for tests and
-    small studies; the environments use compiled loops.
-    """
-    y = np.array(y0, dtype=float)
-    m = y.shape[0]
-    out = np.empty((n_steps + 1, m))
-    out[0] = y
-    k1 = np.empty(m)
-    work = (np.empty(m), np.empty(m), np.empty(m), np.empty(m))
-    for i in range(n_steps):
-        t = t0 + i * h
-        fun(t, out[i], args, k1)
-        step(t, out[i], h, args, k1, work, out[i + 1])
-    return out

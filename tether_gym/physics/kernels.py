@@ -41,36 +41,73 @@ diag(l) A is the (symmetric positive definite) mass matrix of the angles, so the
 solve needs no pivoting. For N = 2 this reduces to NOTES.md's single-tether
 equation th'' = -2 (l'/l - e sin(nu)/k)(1 + th') - 3 sin(2 th) / (2k).
 
-Parameter row layout (``par``; built by :func:`pack_params`):
-``[e, gravity (0 gradient, 1 full), eps = L0/p, a_bound, v_bound, tau, Mt_1..Mt_n]``
-with a_bound = a_max / (L0 n^2) and v_bound = v_max / (L0 n) (inf for no limit).
-State row layout (``y``): ``[th_1..th_n, th_1'..th_n', l_1..l_n, l_1'..l_n']``.
+The state row y and the parameter row par are laid out as declared in
+:mod:`tether_gym.physics.state` (``STATE``, ``PARAMS``); the kernels read them through
+the offsets ``S`` and ``P`` derived from those declarations.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
 
 from .integrators import make_rk4
 from .jit import INLINE, KERNEL, LOOP
+from .layout import at
+from .orbit import coriolis, ddlength_from_accel
+from .state import GRAVITY_FULL_CODE, P, S, mass_fraction
 
-P_ECC, P_GRAV, P_EPS, P_ABOUND, P_VBOUND, P_TAU, P_TAIL = range(7)
-GRAVITY_GRADIENT = 0
-GRAVITY_FULL = 1
-LANE_STRIDE = 8
-"""Lane c of the scratch arrays is slot c * LANE_STRIDE: with the slots between left
-unused, two threads never write to the same 64-byte cache line (no false sharing)."""
+__all__ = ["Scratch", "Substeps", "StepInputs", "StepOutputs", "make_scratch", "advance_one",
+           "controlled_rhs", "controlled_rhs_tension", "transition_rows", "accel_rows",
+           "affine_rows"]
 
 
-def pack_params(eccentricity, tail_masses, gravity=GRAVITY_GRADIENT, length_ratio=0.0,
-                accel_bound=math.inf, speed_bound=math.inf, time_constant=1.0):
-    """Pack one parameter row (see the module docstring) as a float64 array."""
-    tail = np.asarray(tail_masses, dtype=float)
-    head = [eccentricity, float(gravity), length_ratio, accel_bound, speed_bound, time_constant]
-    return np.concatenate([np.asarray(head, dtype=float), tail])
+class Scratch(NamedTuple):
+    """Work arrays of one thread: the SPD solve (S, R), link terms V, tensions, RK4 stages."""
+
+    S: np.ndarray        # (n, n)
+    R: np.ndarray        # (n, 1)
+    V: np.ndarray        # (9, n)
+    tension: np.ndarray  # (n,)
+    k1: np.ndarray       # (4n,) RK4 stages, then the stage input and the step result
+    k2: np.ndarray
+    k3: np.ndarray
+    k4: np.ndarray
+    tmp: np.ndarray
+    ybuf: np.ndarray
+
+
+class Substeps(NamedTuple):
+    """How one control step is integrated: ``count`` RK4 steps of ``h`` [rad]."""
+
+    h: float
+    count: int
+
+
+class StepInputs(NamedTuple):
+    """Per-chain inputs held over a step: commanded l'_cmd [-] and the Eq. 20 disturbance d."""
+
+    command: np.ndarray      # (n,)
+    disturbance: np.ndarray  # (n,) added to theta''
+
+
+class StepOutputs(NamedTuple):
+    """Per-chain results of :func:`advance_one` besides the new state."""
+
+    tension_min: np.ndarray  # (n,) smallest T^ over the substep boundaries
+    derivative: np.ndarray   # (4n,) dy/dnu at the final state (holds theta'', l'')
+    tension: np.ndarray      # (n,) T^ at the final state
+
+
+@njit(**KERNEL)
+def make_scratch(n):
+    """Fresh :class:`Scratch` for n tethers (one per thread)."""
+    m = 4 * n
+    return Scratch(np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(n),
+                   np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m))
 
 
 # --------------------------------------------------------------------------- #
@@ -87,22 +124,25 @@ def _links(nu, y, n, par, V):
 
     V rows: 0 cos th, 1 sin th, 2 w = 1 + th', 3 G^perp, 4 G^par, 5..6 scratch.
     """
-    ecc = par[P_ECC]
+    ecc = par[at(P.eccentricity, n)]
     sn = math.sin(nu)
     k = 1.0 + ecc * math.cos(nu)
     q = 2.0 * ecc * sn / k
+    th = at(S.theta, n)
+    dth = at(S.dtheta, n)
+    ln = at(S.length, n)
     for i in range(n):
-        V[0, i] = math.cos(y[i])
-        V[1, i] = math.sin(y[i])
-        V[2, i] = 1.0 + y[n + i]
+        V[0, i] = math.cos(y[th + i])
+        V[1, i] = math.sin(y[th + i])
+        V[2, i] = 1.0 + y[dth + i]
     # body positions rho_i and their gravity g_i (relative to the main satellite)
     rr = 0.0
     rv = 0.0
-    full = par[P_GRAV] == GRAVITY_FULL
-    eps = par[P_EPS]
+    full = par[at(P.gravity, n)] == GRAVITY_FULL_CODE
+    eps = par[at(P.length_ratio, n)]
     for i in range(n):
-        rr -= y[2 * n + i] * V[0, i]
-        rv -= y[2 * n + i] * V[1, i]
+        rr -= y[ln + i] * V[0, i]
+        rv -= y[ln + i] * V[1, i]
         if full:
             xr = k * eps * rr
             xv = k * eps * rv
@@ -118,7 +158,7 @@ def _links(nu, y, n, par, V):
     Gr = 0.0
     Gv = 0.0
     for j in range(n - 1, -1, -1):
-        mass = par[P_TAIL + j] - (par[P_TAIL + j + 1] if j + 1 < n else 0.0)
+        mass = mass_fraction(par, j, n)
         Gr += mass * V[5, j]
         Gv += mass * V[6, j]
         V[3, j] = -Gr * V[1, j] + Gv * V[0, j]
@@ -129,50 +169,54 @@ def _links(nu, y, n, par, V):
 @njit(**INLINE)
 def _coefficients(j, kk, y, n, par, V, q):
     """Entries (j, k) of the theta-equations: (diag(l) A, P, Q, b0 term) (module doc)."""
-    mt = par[P_TAIL + max(j, kk)]
+    mt = par[at(P.tail_mass, n) + max(j, kk)]
     c = V[0, kk] * V[0, j] + V[1, kk] * V[1, j]
     s = V[1, kk] * V[0, j] - V[0, kk] * V[1, j]
-    lk = y[2 * n + kk]
+    ln = at(S.length, n)
+    lk = y[ln + kk]
     wk = V[2, kk]
-    return (mt * y[2 * n + j] * lk * c,
+    return (mt * y[ln + j] * lk * c,
             mt * (2.0 * wk * c - q * s),
             mt * s,
             -mt * lk * wk * (wk * s + q * c))
 
 
 @njit(**INLINE)
-def _solve_spd(S, R):
+def _solve_spd(S_, R):
     """R <- S^-1 R for symmetric positive definite S (destroyed), R of shape (n, m)."""
-    n = S.shape[0]
+    n = S_.shape[0]
     m = R.shape[1]
     for p in range(n):
-        inv = 1.0 / S[p, p]
+        inv = 1.0 / S_[p, p]
         for i in range(p + 1, n):
-            fac = S[i, p] * inv
+            fac = S_[i, p] * inv
             if fac != 0.0:
                 for j in range(p + 1, n):
-                    S[i, j] -= fac * S[p, j]
+                    S_[i, j] -= fac * S_[p, j]
                 for c in range(m):
                     R[i, c] -= fac * R[p, c]
     for p in range(n - 1, -1, -1):
         for c in range(m):
             acc = R[p, c]
             for j in range(p + 1, n):
-                acc -= S[p, j] * R[j, c]
-            R[p, c] = acc / S[p, p]
+                acc -= S_[p, j] * R[j, c]
+            R[p, c] = acc / S_[p, p]
 
 
 @njit(**INLINE)
-def _theta_ddot(y, n, ddl, ddl_off, par, S, R, V, q, out, out_off):
-    """theta'' into out[out_off:] from V (after :func:`_links`); l'' = ddl[ddl_off:]."""
+def _theta_ddot(y, n, ddl, ddl_off, par, work, q, out, out_off):
+    """theta'' into out[out_off:] from work.V (after :func:`_links`); l'' = ddl[ddl_off:]."""
+    S_, R, V = work.S, work.R, work.V
+    ln = at(S.length, n)
+    dl = at(S.dlength, n)
     for j in range(n):
         b = V[3, j]
         for kk in range(n):
             s_jk, p_jk, q_jk, b_jk = _coefficients(j, kk, y, n, par, V, q)
-            S[j, kk] = s_jk
-            b += b_jk + p_jk * y[3 * n + kk] + q_jk * ddl[ddl_off + kk]
-        R[j, 0] = -y[2 * n + j] * b
-    _solve_spd(S, R)
+            S_[j, kk] = s_jk
+            b += b_jk + p_jk * y[dl + kk] + q_jk * ddl[ddl_off + kk]
+        R[j, 0] = -y[ln + j] * b
+    _solve_spd(S_, R)
     for j in range(n):
         out[out_off + j] = R[j, 0]
 
@@ -180,14 +224,16 @@ def _theta_ddot(y, n, ddl, ddl_off, par, S, R, V, q, out, out_off):
 @njit(**INLINE)
 def _tension(y, n, ddl, ddl_off, ddth, ddth_off, par, V, q, tension):
     """T^ from the e_j components of (*) (module docstring)."""
+    ln = at(S.length, n)
+    dl = at(S.dlength, n)
     for j in range(n):
         acc = -V[4, j]
         for kk in range(n):
-            mt = par[P_TAIL + max(j, kk)]
+            mt = par[at(P.tail_mass, n) + max(j, kk)]
             c = V[0, kk] * V[0, j] + V[1, kk] * V[1, j]
             s = V[1, kk] * V[0, j] - V[0, kk] * V[1, j]
-            lk = y[2 * n + kk]
-            dlk = y[3 * n + kk]
+            lk = y[ln + kk]
+            dlk = y[dl + kk]
             wk = V[2, kk]
             lam = ddl[ddl_off + kk] - q * dlk
             sig = wk * (2.0 * dlk - q * lk)
@@ -195,96 +241,79 @@ def _tension(y, n, ddl, ddl_off, ddth, ddth_off, par, V, q, tension):
         tension[j] = acc
 
 
-@njit(**LOOP)
-def _accel(nu, y, ddlength, par, S, R, V, ddtheta, tension):
-    """theta'' and T^ for one state row y and its l''; R is (n, 1) scratch."""
-    n = ddlength.shape[0]
-    q, sn, k = _links(nu, y, n, par, V)
-    _theta_ddot(y, n, ddlength, 0, par, S, R, V, q, ddtheta, 0)
-    _tension(y, n, ddlength, 0, ddtheta, 0, par, V, q, tension)
-
-
-@njit(**LOOP)
-def _assemble(nu, y, n, par, S, rhs, P, Q, V):
-    """Fill the affine theta-equations (rows scaled by l_j) for one state row y.
-
-    S <- diag(l) A (symmetric), rhs[:, 0] <- -diag(l) b0, P <- P, Q <- Q (unscaled).
-    """
-    q, sn, k = _links(nu, y, n, par, V)
-    for j in range(n):
-        b0 = V[3, j]
-        for kk in range(n):
-            s_jk, p_jk, q_jk, b_jk = _coefficients(j, kk, y, n, par, V, q)
-            S[j, kk] = s_jk
-            P[j, kk] = p_jk
-            Q[j, kk] = q_jk
-            b0 += b_jk
-        rhs[j, 0] = -y[2 * n + j] * b0
-
-
 # --------------------------------------------------------------------------- #
 # reel actuator
 # --------------------------------------------------------------------------- #
 @njit(**INLINE)
-def _reel(k, sn, dlength, command, ecc, a_bound, v_bound, tau):
-    """:func:`reel_ddlength` with k = 1 + e cos(nu) and sin(nu) given."""
+def _reel(k, sn, dlength, command, ecc, par, n):
+    """Actual l'' [-] of one reel given its rate l' and the commanded rate l'_cmd.
+
+    The reel follows the command as a first-order lag in l' with time constant tau
+    [rad], l''_des = (l'_cmd - l') / tau, and its physical acceleration
+    L_ddot / (L0 n^2) = k^4 l'' - 2 e sin(nu) k^3 l' (:func:`~.orbit.reel_accel`) is
+    saturated at +-a_bound; the command is first clipped to the speed bound
+    |L_dot| / (L0 n) = k^2 |l'| <= v_bound (bounds from the parameter row).
+    """
+    a_bound = par[at(P.accel_bound, n)]
+    v_bound = par[at(P.speed_bound, n)]
+    tau = par[at(P.time_constant, n)]
     k2 = k * k
     k4 = k2 * k2
     cmd = command
     if v_bound < math.inf:
         cap = v_bound / k2
         cmd = min(max(cmd, -cap), cap)
-    coriolis = 2.0 * ecc * sn * k2 * k * dlength
-    a = k4 * (cmd - dlength) / tau - coriolis
+    cor = coriolis(k, sn, ecc, dlength)
+    a = k4 * (cmd - dlength) / tau - cor
     a = min(max(a, -a_bound), a_bound)
-    return (a + coriolis) / k4
+    return ddlength_from_accel(k4, cor, a)
 
 
-@njit(**LOOP)
-def reel_ddlength(nu, dlength, command, ecc, a_bound, v_bound, tau):
-    """Actual l'' [-] of one reel given its rate l' and the commanded rate l'_cmd.
+class RhsArgs(NamedTuple):
+    """Everything the controlled right-hand side needs besides (nu, y)."""
 
-    The reel follows the command as a first-order lag in l' with time constant tau
-    [rad], l''_des = (l'_cmd - l') / tau, and its physical acceleration
-    L_ddot / (L0 n^2) = k^4 l'' - 2 e sin(nu) k^3 l' is saturated at +-a_bound; the
-    command is first clipped to the speed bound |L_dot| / (L0 n) = k^2 |l'| <= v_bound.
-    """
-    return _reel(1.0 + ecc * math.cos(nu), math.sin(nu), dlength, command, ecc, a_bound,
-                 v_bound, tau)
+    inputs: StepInputs
+    par: np.ndarray
+    work: Scratch
 
 
 @njit(**INLINE)
 def _controlled(nu, y, args, dy, with_tension):
-    cmd, dist, par, S, R, V, tension = args
+    inputs, par, work = args.inputs, args.par, args.work
+    cmd = inputs.command
     n = cmd.shape[0]
-    q, sn, k = _links(nu, y, n, par, V)
-    ecc = par[P_ECC]
+    q, sn, k = _links(nu, y, n, par, work.V)
+    ecc = par[at(P.eccentricity, n)]
+    th = at(S.theta, n)
+    dth = at(S.dtheta, n)
+    ln = at(S.length, n)
+    dlo = at(S.dlength, n)
     for j in range(n):
-        dl = y[3 * n + j]
-        dy[j] = y[n + j]
-        dy[2 * n + j] = dl
-        dy[3 * n + j] = _reel(k, sn, dl, cmd[j], ecc, par[P_ABOUND], par[P_VBOUND], par[P_TAU])
-    _theta_ddot(y, n, dy, 3 * n, par, S, R, V, q, dy, n)
+        dl = y[dlo + j]
+        dy[th + j] = y[dth + j]
+        dy[ln + j] = dl
+        dy[dlo + j] = _reel(k, sn, dl, cmd[j], ecc, par, n)
+    _theta_ddot(y, n, dy, dlo, par, work, q, dy, dth)
     if with_tension:
-        _tension(y, n, dy, 3 * n, dy, n, par, V, q, tension)
+        _tension(y, n, dy, dlo, dy, dth, par, work.V, q, work.tension)
+    dist = inputs.disturbance
     for j in range(n):
-        dy[n + j] += dist[j]
+        dy[dth + j] += dist[j]
 
 
 @njit(**INLINE)
 def controlled_rhs(nu, y, args, dy):
-    """dy/dnu of the chain with its reels.
+    """dy/dnu of the chain with its reels (:class:`RhsArgs`).
 
-    ``args = (cmd, dist, par, S, R, V, tension)``: commanded reel rates l'_cmd, a
-    disturbance d added to theta'' (paper Eq. 20, f_d = f + d), the parameter row and
-    scratch.
+    The reels follow the commanded rates l'_cmd (:func:`_reel`); the disturbance d is
+    added to theta'' (paper Eq. 20, f_d = f + d).
     """
     _controlled(nu, y, args, dy, False)
 
 
 @njit(**INLINE)
 def controlled_rhs_tension(nu, y, args, dy):
-    """:func:`controlled_rhs` that also writes the tension T^ at (nu, y) into ``args[6]``.
+    """:func:`controlled_rhs` that also writes the tension T^ at (nu, y) into ``work.tension``.
 
     The tension depends on theta'' but not the other way round, so it is computed
     only where it is used (at the RK4 substep boundaries).
@@ -295,150 +324,102 @@ def controlled_rhs_tension(nu, y, args, dy):
 rk4_step = make_rk4(controlled_rhs)
 
 
-@njit(**KERNEL)
-def make_scratch(n, lanes):
-    """Work arrays for :func:`advance_one` with n tethers, one set per lane.
-
-    Each lane (a thread's chunk of rows, or lane 0 for a serial loop) gets its own
-    slice of every array; :func:`scratch_lane` returns lane c's set in the layout
-    :func:`advance_one` takes.
-    """
-    m = 4 * n
-    slots = lanes * LANE_STRIDE
-    return (np.empty((slots, n, n)), np.empty((slots, n, 1)), np.empty((slots, 9, n)),
-            np.empty((slots, n)), np.empty((slots, 6, m)))
-
-
 @njit(**INLINE)
-def scratch_lane(scratch, c):
-    """Lane c of :func:`make_scratch`: (S, R, V, tension, k1, (k2, k3, k4, tmp), ybuf)."""
-    S, R, V, tens, K = scratch
-    i = c * LANE_STRIDE
-    return (S[i], R[i], V[i], tens[i], K[i, 0], (K[i, 1], K[i, 2], K[i, 3], K[i, 4]), K[i, 5])
+def advance_one(nu, y, inputs, par, substeps, work, out):
+    """Advance one state (nu, y) by ``substeps`` (RK4 steps of size h [rad]); y in place.
 
-
-@njit(**INLINE)
-def advance_one(nu, y, cmd, dist, par, h, n_sub, scratch, tension_min, deriv_end, tension_end):
-    """Advance one state (nu, y) by ``n_sub`` RK4 steps of size ``h`` [rad]; y in place.
-
-    Returns the final true anomaly. ``tension_min`` receives the minimum T^ over the
-    substep boundaries (both ends included), ``deriv_end`` dy/dnu at the final state
-    (it holds theta'' and l''), ``tension_end`` T^ at the final state.
+    Returns the final true anomaly. ``out`` (:class:`StepOutputs`) receives the
+    minimum T^ over the substep boundaries (both ends included), dy/dnu at the
+    final state (it holds theta'' and l'') and T^ at the final state. With
+    ``substeps.count == 0`` only the derivative and tension at (nu, y) are evaluated.
     """
-    S, R, V, tens, k1, work, ybuf = scratch
-    n = cmd.shape[0]
-    args = (cmd, dist, par, S, R, V, tens)
+    n = inputs.command.shape[0]
+    args = RhsArgs(inputs, par, work)
+    h = substeps.h
+    n_sub = substeps.count
+    k1 = work.k1
+    stages = (work.k2, work.k3, work.k4, work.tmp)
+    ybuf = work.ybuf
+    tension_min = out.tension_min
     t = nu
     for j in range(n):
         tension_min[j] = math.inf
     # n_sub + 1 evaluations with the tension: at the start of each substep (its k1)
-    # and at the end (deriv_end); one loop, so the inlined right-hand side appears once
+    # and at the end (the derivative); one loop, so the inlined right-hand side
+    # appears once
     for i in range(n_sub + 1):
-        dy = k1 if i < n_sub else deriv_end
+        dy = k1 if i < n_sub else out.derivative
         controlled_rhs_tension(t, y, args, dy)
         for j in range(n):
-            tension_min[j] = min(tension_min[j], tens[j])
+            tension_min[j] = min(tension_min[j], work.tension[j])
         if i == n_sub:
             break
-        rk4_step(t, y, h, args, k1, work, ybuf)
+        rk4_step(t, y, h, args, k1, stages, ybuf)
         for j in range(4 * n):
             y[j] = ybuf[j]
         t = nu + (i + 1) * h
     for j in range(n):
-        tension_end[j] = tens[j]
+        out.tension[j] = work.tension[j]
     return t
 
 
-@njit(**KERNEL)
-def advance(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end):
-    """Batched :func:`advance_one`: every row of (nu (B,), y (B, 4n)) in place.
-
-    ``cmd`` and ``dist`` are (B, n); ``par`` is (B, 6+n) or (1, 6+n) (shared);
-    outputs are (B, n), (B, 4n), (B, n).
-    """
-    _advance_rows(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end,
-                  make_scratch(y.shape[1] // 4, 1))
-
-
+# --------------------------------------------------------------------------- #
+# batched entry points (the public face is tether_gym.physics.dynamics)
+# --------------------------------------------------------------------------- #
 @njit(**LOOP)
-def _advance_rows(nu, y, cmd, dist, par, h, n_sub, tension_min, deriv_end, tension_end,
-                  scratch):
-    lane = scratch_lane(scratch, 0)
+def transition_rows(nu, y, inputs, par, substeps, out, work):
+    """:func:`advance_one` for every row of (nu (B,), y (B, 4n)), in place.
+
+    ``inputs`` and ``out`` hold (B, ...) arrays; ``par`` is (B, P) or (1, P) (shared).
+    """
     shared = par.shape[0] == 1
     for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
-        nu[b] = advance_one(nu[b], y[b], cmd[b], dist[b], pb, h, n_sub, lane,
-                            tension_min[b], deriv_end[b], tension_end[b])
-
-
-# --------------------------------------------------------------------------- #
-# batched evaluations behind TetherChain
-# --------------------------------------------------------------------------- #
-@njit(**INLINE)
-def _pack_row(theta, dtheta, length, dlength, n, row):
-    for j in range(n):
-        row[j] = theta[j]
-        row[n + j] = dtheta[j]
-        row[2 * n + j] = length[j]
-        row[3 * n + j] = dlength[j]
-
-
-@njit(**KERNEL)
-def accel_batch(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension):
-    """theta'' and T^ for a batch of states (arrays of shape (B,) and (B, n))."""
-    n = theta.shape[1]
-    _accel_rows(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension,
-                np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(4 * n))
+        nu[b] = advance_one(nu[b], y[b], StepInputs(inputs.command[b], inputs.disturbance[b]),
+                            pb, substeps,
+                            work, StepOutputs(out.tension_min[b], out.derivative[b],
+                                              out.tension[b]))
 
 
 @njit(**LOOP)
-def _accel_rows(nu, theta, dtheta, length, dlength, ddlength, par, ddtheta, tension,
-                S, R, V, row):
-    n = theta.shape[1]
+def accel_rows(nu, y, ddlength, par, ddtheta, tension, work):
+    """theta'' and T^ for every state row y (B, 4n) and its l'' (B, n)."""
+    n = ddlength.shape[1]
     shared = par.shape[0] == 1
-    for b in range(theta.shape[0]):
+    for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
-        _pack_row(theta[b], dtheta[b], length[b], dlength[b], n, row)
-        _accel(nu[b], row, ddlength[b], pb, S, R, V, ddtheta[b], tension[b])
-
-
-@njit(**KERNEL)
-def affine_batch(nu, theta, dtheta, length, par, f, Bmat, Dmat):
-    """(f, B, D) of theta'' = f + B l' + D l'' for a batch of states."""
-    n = theta.shape[1]
-    _affine_rows(nu, theta, dtheta, length, par, f, Bmat, Dmat, np.empty((n, n)),
-                 np.empty((n, 1 + 2 * n)), np.empty((n, n)), np.empty((n, n)),
-                 np.empty((9, n)), np.zeros(4 * n))
+        q, sn, k = _links(nu[b], y[b], n, pb, work.V)
+        _theta_ddot(y[b], n, ddlength[b], 0, pb, work, q, ddtheta[b], 0)
+        _tension(y[b], n, ddlength[b], 0, ddtheta[b], 0, pb, work.V, q, tension[b])
 
 
 @njit(**LOOP)
-def _affine_rows(nu, theta, dtheta, length, par, f, Bmat, Dmat, S, R, P, Q, V, row):
-    n = theta.shape[1]
+def affine_rows(nu, y, par, f, Bmat, Dmat, work, R):
+    """(f, B, D) of theta'' = f + B l' + D l'' for every state row (its l' is not used).
+
+    ``R`` is (n, 1 + 2n) scratch beside ``work``.
+    """
+    n = f.shape[1]
+    ln = at(S.length, n)
     shared = par.shape[0] == 1
-    for b in range(theta.shape[0]):
+    for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
-        _pack_row(theta[b], dtheta[b], length[b], row[3 * n:], n, row)
-        _assemble(nu[b], row, n, pb, S, R[:, 0:1], P, Q, V)
+        yb = y[b]
+        q, sn, k = _links(nu[b], yb, n, pb, work.V)
+        S_ = work.S
         for j in range(n):
-            lj = length[b, j]
+            b0 = work.V[3, j]
             for kk in range(n):
-                R[j, 1 + kk] = -lj * P[j, kk]
-                R[j, 1 + n + kk] = -lj * Q[j, kk]
-        _solve_spd(S, R)
+                s_jk, p_jk, q_jk, b_jk = _coefficients(j, kk, yb, n, pb, work.V, q)
+                S_[j, kk] = s_jk
+                lj = yb[ln + j]
+                R[j, 1 + kk] = -lj * p_jk
+                R[j, 1 + n + kk] = -lj * q_jk
+                b0 += b_jk
+            R[j, 0] = -yb[ln + j] * b0
+        _solve_spd(S_, R)
         for j in range(n):
             f[b, j] = R[j, 0]
             for kk in range(n):
                 Bmat[b, j, kk] = R[j, 1 + kk]
                 Dmat[b, j, kk] = R[j, 1 + n + kk]
-
-
-@njit(**LOOP)
-def reel_batch(nu, dlength, command, par, out):
-    """Vectorised :func:`reel_ddlength` over a batch (B,), (B, n)."""
-    batch, n = dlength.shape
-    shared = par.shape[0] == 1
-    for b in range(batch):
-        pb = par[0] if shared else par[b]
-        for j in range(n):
-            out[b, j] = reel_ddlength(nu[b], dlength[b, j], command[b, j], pb[P_ECC],
-                                      pb[P_ABOUND], pb[P_VBOUND], pb[P_TAU])

@@ -8,7 +8,7 @@ from .reference import (
     zero_state_length,
     zero_state_reel_rate,
 )
-from .reward import COMPONENTS, RewardWeights, reward_terms
+from .reward import COMPONENTS, PENALTIES, RewardWeights, reward_terms
 from .termination import Failure, failure_code
 
 __all__ = [
@@ -21,6 +21,7 @@ __all__ = [
     "RewardWeights",
     "reward_terms",
     "COMPONENTS",
+    "PENALTIES",
     "Failure",
     "failure_code",
 ]

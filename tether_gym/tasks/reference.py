@@ -11,9 +11,13 @@ A = 0 is the zero state of Sec. 3.1.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
+
+from ..physics.jit import INLINE
 
 __all__ = [
     "desired_libration",
+    "desired_libration_jit",
     "zero_state_reel_rate",
     "zero_state_length",
     "periodic_reel_rate",
@@ -23,11 +27,18 @@ __all__ = [
 
 
 def desired_libration(nu, amplitude, frequency):
-    """(theta_d, theta_d', theta_d'') [rad, rad/rad, rad/rad^2] at true anomaly nu."""
-    phase = frequency * np.asarray(nu, dtype=float)
+    """(theta_d, theta_d', theta_d'') [rad, rad/rad, rad/rad^2] at true anomaly nu.
+
+    Plain arithmetic on floats or arrays; :func:`desired_libration_jit` is the same
+    function compiled for the kernels.
+    """
+    phase = frequency * nu
     s = np.sin(phase)
     return (amplitude * s, amplitude * frequency * np.cos(phase),
-            -amplitude * frequency**2 * s)
+            -amplitude * frequency * frequency * s)
+
+
+desired_libration_jit = njit(**INLINE)(desired_libration)
 
 
 def _expand(nu, like):

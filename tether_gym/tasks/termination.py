@@ -11,6 +11,10 @@ from enum import IntEnum
 
 from numba import njit
 
+from ..physics.jit import INLINE
+from ..physics.layout import at
+from ..physics.state import S
+
 __all__ = ["Failure", "failure_code", "TUMBLE_ANGLE"]
 
 TUMBLE_ANGLE = 0.5 * math.pi
@@ -35,7 +39,7 @@ class Failure(IntEnum):
         return None if self is Failure.NONE else str(self)
 
 
-@njit(cache=True, inline="always", error_model="numpy")
+@njit(**INLINE)
 def failure_code(y, tension_min, length_min, length_max):
     """Failure code of one state row y = [theta, theta', l, l'] (checked in this order).
 
@@ -54,11 +58,13 @@ def failure_code(y, tension_min, length_min, length_max):
     for j in range(n):
         if tension_min[j] <= 0.0:
             return 2
+    th = at(S.theta, n)
+    ln = at(S.length, n)
     for j in range(n):
-        if abs(y[j]) >= TUMBLE_ANGLE:
+        if abs(y[th + j]) >= TUMBLE_ANGLE:
             return 3
     for j in range(n):
-        lj = y[2 * n + j]
+        lj = y[ln + j]
         if lj < length_min or lj > length_max:
             return 4
     return 0

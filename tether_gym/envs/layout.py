@@ -1,0 +1,113 @@
+"""The observation and the ``info`` entries of the libration environments, declared once.
+
+The compiled step (:mod:`tether_gym.envs.step_kernel`) writes both through the
+offsets derived here (``O`` and ``I``); the environments build their observation
+space, the ``info`` dicts and the docstring tables from the same declarations, and
+``tether_gym_agents`` reads observations with :data:`OBSERVATION` too. Adding an
+observation field or an info entry means adding a :class:`Field` here and the line of
+the step kernel that computes it.
+
+``info`` entries live in two buffers: one value per entry (``Field.per_tether``
+False) in ``scalars[c0]``, one array per entry in ``vectors[c1]``, where (c0, c1) is
+the entry's :attr:`Layout.index` pair. ``failure`` holds the :class:`Failure` code
+and becomes its label (None while healthy) in the dict.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..physics.layout import Field, Layout
+from ..tasks.reward import COMPONENTS
+from ..tasks.termination import Failure
+
+__all__ = ["OBSERVATION", "INFO", "O", "I", "INFO_KEYS", "info_dict", "observation_bounds",
+           "markdown_table", "N_INFO_SCALARS", "N_INFO_VECTORS"]
+
+OBSERVATION = Layout("observation", (
+    Field("sin_nu", False, "[-]", "sin(nu): orbital phase", -1.0, 1.0),
+    Field("cos_nu", False, "[-]", "cos(nu): orbital phase", -1.0, 1.0),
+    Field("theta", True, "[rad]", "theta_i"),
+    Field("dtheta", True, "[rad/rad]", "theta_i' = d theta_i / d nu"),
+    Field("length", True, "[-]", "l_i"),
+    Field("dlength", True, "[-]", "l_i' (actual reel rates)"),
+    Field("theta_ref", False, "[rad]", "theta_d (reference)"),
+    Field("dtheta_ref", False, "[rad/rad]", "theta_d' (reference)"),
+    Field("eccentricity", False, "[-]", "eccentricity e", optional="params"),
+    Field("mass_fractions", True, "[-]", "mass fractions M_i", optional="params"),
+))
+O = OBSERVATION.index
+"""Offsets of the observation's fields."""
+
+_COMPONENT_DOCS = {"reward_tracking": "r_track, the tracking factor of the reward"}
+
+INFO = Layout("info", (
+    Field("nu", False, "[rad]", "true anomaly (not wrapped)"),
+    Field("theta", True, "[rad]", "libration angles"),
+    Field("dtheta", True, "[rad/rad]", "theta'"),
+    Field("length", True, "[-]", "tether lengths"),
+    Field("dlength", True, "[-]", "reel rates l'"),
+    Field("ddlength", True, "[-]", "reel accelerations l'' at the end of the step"),
+    Field("tension", True, "[-]", "tensions T^ at the end of the step"),
+    Field("tension_min", True, "[-]", "smallest T^ at the physics substeps of the step"),
+    Field("theta_ref", False, "[rad]", "theta_d"),
+    Field("dtheta_ref", False, "[rad/rad]", "theta_d'"),
+    Field("reel_accel", True, "[m/s^2]", "physical reel accelerations L_ddot"),
+    Field("eccentricity", False, "[-]", "e of the episode"),
+    Field("failure", False, "[-]", "None, or why the episode terminated"),
+) + tuple(Field(name, False, "[-]", _COMPONENT_DOCS.get(name, "reward penalty (<= 0)"))
+          for name in COMPONENTS))
+I = INFO.index  # noqa: E741 - the info layout's index, beside O
+"""Buffer index of each info entry: ``scalars[I.nu[0]]``, ``vectors[I.theta[1]]``."""
+
+INFO_KEYS = INFO.names
+"""Keys of the ``info`` dict, in order."""
+
+_FAILURE_LABELS = np.empty(len(Failure), dtype=object)
+_FAILURE_LABELS[:] = [Failure(code).label for code in range(len(Failure))]
+_SCALARS = tuple(f.name for f in INFO if not f.per_tether)
+_VECTORS = tuple(f.name for f in INFO if f.per_tether)
+
+
+N_INFO_SCALARS = len(_SCALARS)
+"""Rows of the scalar info buffer."""
+N_INFO_VECTORS = len(_VECTORS)
+"""Rows of the per-tether info buffer."""
+
+
+def info_dict(scalars, vectors) -> dict:
+    """The ``info`` dict from the two buffers' entries of one env or of all (INFO_KEYS order).
+
+    ``scalars`` is a sequence of floats (or of (num,) arrays) and ``vectors`` of (n,)
+    (or (num, n)) arrays, in the buffers' row order.
+    """
+    values = dict(zip(_SCALARS, scalars, strict=True))
+    values.update(zip(_VECTORS, vectors, strict=True))
+    code = values["failure"]
+    values["failure"] = (_FAILURE_LABELS[int(code)] if isinstance(code, float)
+                         else _FAILURE_LABELS[np.asarray(code, dtype=np.int64)])
+    return {key: values[key] for key in INFO_KEYS}
+
+
+def observation_bounds(n: int, with_params: bool) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) float32 arrays of the observation box for n tethers."""
+    low = np.full(OBSERVATION.size(n, params=with_params), -np.inf, dtype=np.float32)
+    high = -low
+    for name, sl in OBSERVATION.slices(n, params=with_params).items():
+        low[sl] = OBSERVATION[name].low
+        high[sl] = OBSERVATION[name].high
+    return low, high
+
+
+def markdown_table(layout: Layout, with_optional: str = "") -> str:
+    """Rows of a markdown table (index range, field, unit) for docstrings."""
+    lines = ["| Index | Field | Unit |", "|---|---|---|"]
+    for f in layout:
+        c0, c1 = getattr(layout.index, f.name)
+        start = str(c0) if c1 == 0 else (f"{c0} + {c1}n" if c0 else f"{c1}n")
+        if f.per_tether:
+            start += " .. +n-1"
+        note = f" (with {f.optional})" if f.optional else ""
+        lines.append(f"| {start} | {f.doc}{note} | {f.unit} |")
+    return "\n".join(lines)
+

@@ -1,0 +1,51 @@
+"""Calling a compiled kernel without numba's per-call type dispatch.
+
+numba's dispatcher works out the numba type of every argument on every call. For
+arrays and plain tuples it has a fast path; for named tuples it falls back to Python
+and costs about 10 us per call, more than a whole single-env step. The callers of
+:class:`Direct` pass arguments whose types never change (arrays they allocated
+themselves, with fixed dtypes, dimensions and C order), so the compiled entry point
+found on the first call serves every later call.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["Direct"]
+
+
+class Direct:
+    """A compiled function called through its entry point after the first call.
+
+    Parameters
+    ----------
+    dispatcher : numba Dispatcher
+        The ``@njit`` function.
+
+    Notes
+    -----
+    The first call goes through the dispatcher (compiling or loading from the cache)
+    and records the entry point of the signature it resolved. Every argument of a
+    later call must have the same numba type (dtype, ndim, layout, tuple structure)
+    as in that first call: the entry point does not check it. Without the private
+    attributes this relies on (``overloads``, ``entry_point``) every call goes
+    through the dispatcher.
+    """
+
+    def __init__(self, dispatcher: Any):
+        self._dispatcher = dispatcher
+        self._entry: Any = None
+        self.__doc__ = dispatcher.__doc__
+
+    def __call__(self, *args: Any) -> Any:
+        entry = self._entry
+        if entry is not None:
+            return entry(*args)
+        result = self._dispatcher(*args)
+        try:
+            sig = tuple(self._dispatcher.typeof_pyval(a) for a in args)
+            self._entry = self._dispatcher.overloads[sig].entry_point
+        except (AttributeError, KeyError):  # pragma: no cover - numba internals moved
+            self._entry = self._dispatcher
+        return result
