@@ -42,8 +42,8 @@ def advance(nu, y, cmd, par, h, n_sub, dist=None):
     return out.tension_min, out.derivative, out.tension
 
 
-def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
-    """Take ``n_steps`` steps with a stepper from :func:`make_rk4` (a Python loop).
+def rk4_integrate(integrate, t0, y0, h, n_steps, args):
+    """Take ``n_steps`` steps with an integrator from :func:`make_rk4`, one call per step.
 
     Returns the array of states, shape (n_steps + 1, len(y0)).
     """
@@ -51,12 +51,12 @@ def rk4_integrate(step, fun, t0, y0, h, n_steps, args):
     m = y.shape[0]
     out = np.empty((n_steps + 1, m))
     out[0] = y
-    k1 = np.empty(m)
-    work = (np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+    work = tuple(np.empty(m) for _ in range(5))
+    deriv = np.empty(m)
     for i in range(n_steps):
-        t = t0 + i * h
-        fun(t, out[i], args, k1)
-        step(t, out[i], h, args, k1, work, out[i + 1])
+        t = integrate(t0 + i * h, y, h, 1, args, work, deriv)
+        assert t == t0 + i * h + h
+        out[i + 1] = y
     return out
 
 

@@ -20,7 +20,7 @@ LINEAR = np.array([[0.0, 1.0, 0.0], [-4.0, -0.1, 0.5], [0.3, 0.0, -1.0]])
 
 
 @njit(cache=True)
-def _linear_rhs(t, y, args, dydt):
+def _linear_rhs(t, y, args, dydt, node):
     a = args[0]
     for i in range(y.shape[0]):
         acc = 0.0
@@ -29,7 +29,7 @@ def _linear_rhs(t, y, args, dydt):
         dydt[i] = acc
 
 
-def _cubic_rhs(t, y, args, dydt):
+def _cubic_rhs(t, y, args, dydt, node=False):
     """y' = (1 + 2t - 3t^2 + 4t^3) * [1, -2]: the solution is a quartic in t."""
     dydt[0] = 1.0 + 2.0 * t - 3.0 * t**2 + 4.0 * t**3
     dydt[1] = -2.0 * dydt[0]
@@ -47,7 +47,7 @@ def test_rk4_exact_for_quartic_solutions():
     step = make_rk4(_cubic_rhs, compiled=False)
     t0, h, n = -0.7, 0.13, 20
     y0 = _cubic_solution(t0)
-    traj = rk4_integrate(step, _cubic_rhs, t0, y0, h, n, None)
+    traj = rk4_integrate(step, t0, y0, h, n, None)
     assert traj.shape == (n + 1, 2)
     np.testing.assert_array_equal(traj[0], y0)
     expected = np.array([_cubic_solution(t0 + i * h) for i in range(n + 1)])
@@ -62,10 +62,10 @@ def test_rk4_fourth_order_on_linear_system():
     errors = []
     for n_steps in (40, 80, 160):
         h = T / n_steps
-        traj = rk4_integrate(_STEP_LINEAR, _linear_rhs, 0.0, y0, h, n_steps, (LINEAR,))
+        traj = rk4_integrate(_STEP_LINEAR, 0.0, y0, h, n_steps, (LINEAR,))
         errors.append(np.max(np.abs(traj[-1] - exact)))
         plain = make_rk4(_linear_rhs.py_func, compiled=False)
-        traj_py = rk4_integrate(plain, _linear_rhs.py_func, 0.0, y0, h, n_steps, (LINEAR,))
+        traj_py = rk4_integrate(plain, 0.0, y0, h, n_steps, (LINEAR,))
         np.testing.assert_allclose(traj_py, traj, rtol=1e-15, atol=1e-15)
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
     assert errors[-1] > 1e-9  # far above roundoff
@@ -73,25 +73,43 @@ def test_rk4_fourth_order_on_linear_system():
 
 
 def test_rk4_step_contract():
-    """One step is R(hA) y for y' = A y; y and k1 are left untouched; k1 is really used."""
+    """One step is R(hA) y for y' = A y; deriv is f at the end; y changes in place.
+
+    ``fun`` sees ``node=True`` exactly at the grid nodes (start of each step and the
+    end), n_steps + 1 times, and ``node=False`` three times per step.
+    """
     y = np.array([0.3, -0.2, 0.9])
-    k1 = np.empty(3)
-    _linear_rhs(0.4, y, (LINEAR,), k1)
-    y_copy, k1_copy = y.copy(), k1.copy()
-    out = np.empty(3)
-    _STEP_LINEAR(0.4, y, 0.05, (LINEAR,), k1, np.empty((4, 3)), out)
-    np.testing.assert_array_equal(y, y_copy)
-    np.testing.assert_array_equal(k1, k1_copy)
+    y0 = y.copy()
+    deriv = np.empty(3)
+    work = tuple(np.empty(3) for _ in range(5))
+    t = _STEP_LINEAR(0.4, y, 0.05, 1, (LINEAR,), work, deriv)
+    assert t == 0.4 + 0.05
     # for y' = A y one RK4 step is the degree-4 Taylor polynomial of exp(hA)
     ha = 0.05 * LINEAR
     taylor = np.eye(3) + ha + ha @ ha / 2 + ha @ ha @ ha / 6 + ha @ ha @ ha @ ha / 24
-    np.testing.assert_allclose(out, taylor @ y, rtol=1e-15, atol=1e-15)
-    # a wrong k1 changes the result: the stepper really uses the caller's k1
-    out2 = np.empty(3)
-    _STEP_LINEAR(0.4, y, 0.05, (LINEAR,), k1 + 1.0, np.empty((4, 3)), out2)
-    # (a shift d of k1 moves k2..k4 by (hA/2) d, (hA)^2/4 d, (hA)^3/4 d)
-    shift = 0.05 / 6.0 * (np.eye(3) + ha + ha @ ha / 2 + ha @ ha @ ha / 4) @ np.ones(3)
-    np.testing.assert_allclose(out2 - out, shift, rtol=1e-10)
+    np.testing.assert_allclose(y, taylor @ y0, rtol=1e-15, atol=1e-15)
+    np.testing.assert_allclose(deriv, LINEAR @ y, rtol=1e-15, atol=1e-15)
+
+    calls = []
+
+    def recording(t, y, args, dydt, node):
+        calls.append((round(t, 12), node))
+        dydt[:] = LINEAR @ y
+
+    plain = make_rk4(recording, compiled=False)
+    plain(0.0, y0.copy(), 0.1, 3, None, tuple(np.empty(3) for _ in range(5)), np.empty(3))
+    assert [t for t, node in calls if node] == [0.0, 0.1, 0.2, 0.3]
+    assert len(calls) == 3 * 4 + 1
+    assert [t for t, node in calls if not node] == [0.05, 0.05, 0.1, 0.15, 0.15, 0.2,
+                                                   0.25, 0.25, 0.3]
+    # zero steps: one evaluation at the start, y untouched
+    calls.clear()
+    y1 = y0.copy()
+    deriv = np.empty(3)
+    assert plain(0.7, y1, 0.1, 0, None, tuple(np.empty(3) for _ in range(5)), deriv) == 0.7
+    assert calls == [(0.7, True)]
+    np.testing.assert_array_equal(y1, y0)
+    np.testing.assert_allclose(deriv, LINEAR @ y0, rtol=1e-15)
 
 
 # --------------------------------------------------------------------------- #

@@ -127,7 +127,7 @@ def test_eq10_state_feedback_tracks_periodic_solution():
     n_steps = int(np.ceil(6.0 * np.pi / h))
     eye = np.eye(n)
 
-    def rhs(nu, y, args, dydt):
+    def rhs(nu, y, args, dydt, node=False):
         Y = y.reshape(3, 3 * n)
         th, dth, ln = Y[:, :n], Y[:, n:2 * n], Y[:, 2 * n:]
         dl = periodic_reel_rate(nu, th, dth, ln, e, amps[:, None])  # one row per A
@@ -143,7 +143,7 @@ def test_eq10_state_feedback_tracks_periodic_solution():
     step = make_rk4(rhs, compiled=False)
     y0 = np.concatenate([np.zeros((3, n)), np.repeat(amps[:, None], n, axis=1),
                          np.full((3, n), 0.5)], axis=1).ravel()
-    traj = rk4_integrate(step, rhs, 0.0, y0, h, n_steps, None).reshape(n_steps + 1, 3, 3 * n)
+    traj = rk4_integrate(step, 0.0, y0, h, n_steps, None).reshape(n_steps + 1, 3, 3 * n)
     nu = h * np.arange(n_steps + 1)
     assert nu[-1] >= 6.0 * np.pi
     target = amps[None, :, None] * np.sin(nu)[:, None, None]

@@ -97,9 +97,9 @@ class ChainBatch:
             failure=np.zeros(num, dtype=np.int64),
             tension_min=np.zeros((num, n)), tension=np.zeros((num, n)),
             derivative=np.zeros((num, m)),
-            info_s=np.zeros((N_INFO_SCALARS, num)), info_v=np.zeros((N_INFO_VECTORS, num, n)))
-        self.steps = np.zeros(num, dtype=np.int64)
-        self.nu_end = np.zeros(num)
+            info_s=np.zeros((N_INFO_SCALARS, num)), info_v=np.zeros((N_INFO_VECTORS, num, n)),
+            steps=np.zeros(num, dtype=np.int64), nu_end=np.zeros(num),
+            truncated=np.zeros(num, dtype=np.bool_))
         self.cfg = step_config(config)
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
         # standard uniform / normal variates of each draw, and their rows as views
@@ -138,6 +138,10 @@ class ChainBatch:
     @property
     def failure(self) -> np.ndarray:
         return self.rows.failure
+
+    @property
+    def steps(self) -> np.ndarray:
+        return self.rows.steps
 
     # ------------------------------------------------------------------ #
     def reset_rows(self, rows, rngs, options=None) -> None:
@@ -188,10 +192,9 @@ class ChainBatch:
                    periodic_reel_rate(nu0, ref, dref, length, ecc[:, None], cfg.amplitude,
                                       cfg.frequency))
         r.nu[rows] = nu0
-        self.nu_end[rows] = nu0 + cfg.episode_length
+        r.nu_end[rows] = nu0 + cfg.episode_length
         fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
         r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
-        self.steps[rows] = 0
         r.failure[rows] = 0
         r.reward[rows] = 0.0
         r.components[rows] = 0.0
@@ -206,16 +209,32 @@ class ChainBatch:
         disturbance and noise. ``rows`` (int64 indices) leaves the other rows
         untouched (no physics, no random draws). ``n_chunks`` > 1 splits the rows into
         that many contiguous chunks run on threads (bitwise the same results).
+
+        Raises
+        ------
+        ValueError
+            If a stepped row's action is NaN or inf; then nothing has changed.
         """
-        if self._random_step:
+        index = self._all_rows if rows is None else rows
+        if n_chunks > 1 and len(index) > 1:
+            bad = self._check_finite(action, index)
+            if self._random_step:
+                self._draw_step_noise(rngs, rows)
+            self._step_threaded(action, index, min(n_chunks, len(index)))
+        elif self._random_step:
+            bad = self._check_finite(action, index)
             self._draw_step_noise(rngs, rows)
-        if rows is None:
-            rows = self._all_rows
-        if n_chunks > 1 and len(rows) > 1:
-            self._step_threaded(action, rows, min(n_chunks, len(rows)))
-        else:
-            self._step(rows, action, self.rows, self.cfg, self._work[0], False)
-        self.steps[rows] += 1
+            self._step(index, action, self.rows, self.cfg, self._work[0], False)
+        else:  # the kernel checks the actions before it steps any row
+            bad = self._step(index, action, self.rows, self.cfg, self._work[0], False)
+        if bad >= 0:
+            raise ValueError(f"actions must be finite (no NaN or inf); row {bad} is not: "
+                             f"{action[bad]!r}")
+
+    def _check_finite(self, action: np.ndarray, index: np.ndarray) -> int:
+        """-1 if the listed rows' actions are finite, else the first bad row."""
+        ok = np.isfinite(action[index]).all(axis=1)
+        return -1 if ok.all() else int(index[np.argmin(ok)])
 
     def _step_threaded(self, action: np.ndarray, rows: np.ndarray, n_chunks: int) -> None:
         """Chunks 1.. on the pool's threads, chunk 0 on this one; wait for all."""
@@ -270,12 +289,12 @@ class ChainBatch:
 
     def truncated(self) -> np.ndarray:
         """Rows whose episode has reached its length in true anomaly."""
-        return self.rows.nu >= self.nu_end - 1e-9
+        return self.rows.truncated
 
     # ------------------------------------------------------------------ #
     def info(self, b: int) -> dict:
         """The documented ``info`` dict of row b (floats and fresh (n,) arrays)."""
-        return info_dict(self.rows.info_s[:, b].tolist(), self.rows.info_v[:, b].copy())
+        return info_dict(self.rows.info_s[:, b].tolist(), list(self.rows.info_v[:, b].copy()))
 
     def info_arrays(self) -> dict:
         """Every row's :meth:`info` stacked: a dict of fresh (num, ...) arrays.

@@ -75,18 +75,21 @@ N_INFO_VECTORS = len(_VECTORS)
 """Rows of the per-tether info buffer."""
 
 
+_ORDER = tuple((f.name, f.per_tether, getattr(INFO.index, f.name)[1 if f.per_tether else 0])
+               for f in INFO)
+
+
 def info_dict(scalars, vectors) -> dict:
     """The ``info`` dict from the two buffers' entries of one env or of all (INFO_KEYS order).
 
     ``scalars`` is a sequence of floats (or of (num,) arrays) and ``vectors`` of (n,)
     (or (num, n)) arrays, in the buffers' row order.
     """
-    values = dict(zip(_SCALARS, scalars, strict=True))
-    values.update(zip(_VECTORS, vectors, strict=True))
-    code = values["failure"]
-    values["failure"] = (_FAILURE_LABELS[int(code)] if isinstance(code, float)
-                         else _FAILURE_LABELS[np.asarray(code, dtype=np.int64)])
-    return {key: values[key] for key in INFO_KEYS}
+    info = {key: vectors[i] if per_tether else scalars[i] for key, per_tether, i in _ORDER}
+    code = info["failure"]
+    info["failure"] = (_FAILURE_LABELS[int(code)] if isinstance(code, float)
+                       else _FAILURE_LABELS[np.asarray(code, dtype=np.int64)])
+    return info
 
 
 def observation_bounds(n: int, with_params: bool) -> tuple[np.ndarray, np.ndarray]:

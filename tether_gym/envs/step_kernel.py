@@ -66,6 +66,9 @@ class Rows(NamedTuple):
     derivative: np.ndarray   # (B, m) dy/dnu at the end of the step
     info_s: np.ndarray       # (scalar entries, B) info buffers (INFO layout)
     info_v: np.ndarray       # (vector entries, B, n)
+    steps: np.ndarray        # (B,) int64 control steps since the reset
+    nu_end: np.ndarray       # (B,) true anomaly at which the episode is truncated [rad]
+    truncated: np.ndarray    # (B,) bool: nu has reached nu_end
 
 
 class RowWork(NamedTuple):
@@ -190,17 +193,24 @@ def step_rows(index, action, rows, cfg, work, reset):
     """One control step of the rows listed in ``index`` (int64), in place; others untouched.
 
     ``action`` (B, n) holds the normalised reel-rate commands, clipped to [-1, 1]
-    (l'_cmd = action * max_reel_rate). With ``reset`` True the listed rows, whose
-    ``nu``, ``y``, ``par`` and ``noise`` were just set, are not stepped: they get
-    dy/dnu and T^ at their initial state with the reels holding their rate (the state
-    the first step starts from), and their observation and info entries; their
-    reward components must be zero.
+    (l'_cmd = action * max_reel_rate). Returns -1, or, before anything is stepped,
+    the first listed row whose action is NaN or inf (then no row is touched). With
+    ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
+    ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at their
+    initial state with the reels holding their rate (the state the first step starts
+    from), their observation and info entries, and zero steps; their reward
+    components must be zero.
 
     A row whose state turns non-finite keeps its previous state (so nothing
     non-finite reaches the observation) and gets failure code 1 and reward 0.
     """
     m = rows.y.shape[1]
     n = m // 4
+    if not reset:
+        for i in range(index.shape[0]):
+            for j in range(n):
+                if not math.isfinite(action[index[i], j]):
+                    return index[i]
     no_steps = kernels.Substeps(cfg.substeps.h, 0)
     shared = rows.par.shape[0] == 1
     for i in range(index.shape[0]):
@@ -208,11 +218,11 @@ def step_rows(index, action, rows, cfg, work, reset):
         yb = rows.y[b]
         pb = rows.par[0] if shared else rows.par[b]
         out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
-        if reset:
+        if reset:  # evaluate only: the reels hold their rate, no disturbance
             for j in range(n):
                 work.command[j] = yb[at(S.dlength, n) + j]
             inputs = kernels.StepInputs(work.command, work.zero)
-            kernels.advance_one(rows.nu[b], yb, inputs, pb, no_steps, work.physics, out)
+            substeps = no_steps
         else:
             for k in range(m):
                 work.previous[k] = yb[k]
@@ -221,7 +231,14 @@ def step_rows(index, action, rows, cfg, work, reset):
                 work.action[j] = a
                 work.command[j] = a * cfg.max_reel_rate
             inputs = kernels.StepInputs(work.command, rows.disturbance[b])
-            rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, cfg.substeps,
-                                             work.physics, out)
+            substeps = cfg.substeps
+        rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps, work.physics,
+                                         out)
+        if reset:
+            rows.steps[b] = 0
+        else:
+            rows.steps[b] += 1
             _task(b, cfg, work, rows)
+        rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
         write_outputs(b, rows, cfg)
+    return -1

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -34,12 +32,13 @@ def action_space(config: EnvConfig) -> spaces.Box:
 
 
 def check_action(action, n: int) -> np.ndarray:
-    """Return the action as a float64 (1, n) array; ValueError on a wrong shape or NaN/inf."""
+    """Return the action as a C-contiguous float64 (1, n) array; ValueError on a wrong shape.
+
+    NaN and inf are rejected by the step itself, before it changes anything.
+    """
     a = np.asarray(action, dtype=np.float64)
     if a.shape != (n,):
         raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
-    if not all(map(math.isfinite, a.tolist())):  # faster than np.isfinite for small n
-        raise ValueError(f"action={action!r} must be finite (no NaN or inf)")
     return np.ascontiguousarray(a.reshape(1, n))
 
 
@@ -215,9 +214,13 @@ class TetherLibrationEnv(gym.Env):
         if self._needs_reset:
             raise RuntimeError("call reset() before step() (the episode has ended or not begun)")
         batch = self._batch
-        batch.step(check_action(action, self.config.n_tethers), self._rngs)
+        a = check_action(action, self.config.n_tethers)
+        try:
+            batch.step(a, self._rngs)
+        except ValueError:
+            raise ValueError(f"action={action!r} must be finite (no NaN or inf)") from None
         terminated = bool(batch.failure[0] != 0)
-        truncated = bool(batch.truncated()[0]) and not terminated
+        truncated = bool(batch.rows.truncated[0]) and not terminated
         self._needs_reset = terminated or truncated
         if self.render_mode == "human":
             self.render()

@@ -233,7 +233,7 @@ class TetherLibrationVectorEnv(VectorEnv):
         if a.shape != (self.num_envs, n):
             raise ValueError(f"actions must have shape ({self.num_envs}, {n}) (num_envs, N-1), "
                              f"got {a.shape}: {actions!r}")
-        if not np.isfinite(a).all():
+        if not np.isfinite(a).all():  # checked here: autoreset rows ignore their action
             bad = np.flatnonzero(~np.isfinite(a).all(axis=1))
             raise ValueError(f"actions must be finite (no NaN or inf); rows {bad.tolist()} are "
                              f"not: {a[bad]!r}")

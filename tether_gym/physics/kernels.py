@@ -61,7 +61,7 @@ from .orbit import coriolis, ddlength_from_accel
 from .state import GRAVITY_FULL_CODE, P, S, mass_fraction
 
 __all__ = ["Scratch", "Substeps", "StepInputs", "StepOutputs", "make_scratch", "advance_one",
-           "controlled_rhs", "controlled_rhs_tension", "transition_rows", "accel_rows",
+           "controlled_rhs", "transition_rows", "accel_rows",
            "affine_rows"]
 
 
@@ -72,12 +72,11 @@ class Scratch(NamedTuple):
     R: np.ndarray        # (n, 1)
     V: np.ndarray        # (9, n)
     tension: np.ndarray  # (n,)
-    k1: np.ndarray       # (4n,) RK4 stages, then the stage input and the step result
+    k1: np.ndarray       # (4n,) RK4 stages, then the stage input
     k2: np.ndarray
     k3: np.ndarray
     k4: np.ndarray
     tmp: np.ndarray
-    ybuf: np.ndarray
 
 
 class Substeps(NamedTuple):
@@ -107,7 +106,7 @@ def make_scratch(n):
     """Fresh :class:`Scratch` for n tethers (one per thread)."""
     m = 4 * n
     return Scratch(np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(n),
-                   np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+                   np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m))
 
 
 # --------------------------------------------------------------------------- #
@@ -275,10 +274,19 @@ class RhsArgs(NamedTuple):
     inputs: StepInputs
     par: np.ndarray
     work: Scratch
+    tension_min: np.ndarray  # (n,) running minimum of T^ over the grid nodes
 
 
 @njit(**INLINE)
-def _controlled(nu, y, args, dy, with_tension):
+def controlled_rhs(nu, y, args, dy, node):
+    """dy/dnu of the chain with its reels (:class:`RhsArgs`), the integrator's ``fun``.
+
+    The reels follow the commanded rates l'_cmd (:func:`_reel`); the disturbance d is
+    added to theta'' (paper Eq. 20, f_d = f + d). At a grid node (``node``) the
+    tension T^ at (nu, y) is computed too, into ``work.tension``, and folded into
+    ``args.tension_min``: it depends on theta'' but not the other way round, so it
+    is computed only where it is used.
+    """
     inputs, par, work = args.inputs, args.par, args.work
     cmd = inputs.command
     n = cmd.shape[0]
@@ -294,34 +302,16 @@ def _controlled(nu, y, args, dy, with_tension):
         dy[ln + j] = dl
         dy[dlo + j] = _reel(k, sn, dl, cmd[j], ecc, par, n)
     _theta_ddot(y, n, dy, dlo, par, work, q, dy, dth)
-    if with_tension:
+    if node:
         _tension(y, n, dy, dlo, dy, dth, par, work.V, q, work.tension)
+        for j in range(n):
+            args.tension_min[j] = min(args.tension_min[j], work.tension[j])
     dist = inputs.disturbance
     for j in range(n):
         dy[dth + j] += dist[j]
 
 
-@njit(**INLINE)
-def controlled_rhs(nu, y, args, dy):
-    """dy/dnu of the chain with its reels (:class:`RhsArgs`).
-
-    The reels follow the commanded rates l'_cmd (:func:`_reel`); the disturbance d is
-    added to theta'' (paper Eq. 20, f_d = f + d).
-    """
-    _controlled(nu, y, args, dy, False)
-
-
-@njit(**INLINE)
-def controlled_rhs_tension(nu, y, args, dy):
-    """:func:`controlled_rhs` that also writes the tension T^ at (nu, y) into ``work.tension``.
-
-    The tension depends on theta'' but not the other way round, so it is computed
-    only where it is used (at the RK4 substep boundaries).
-    """
-    _controlled(nu, y, args, dy, True)
-
-
-rk4_step = make_rk4(controlled_rhs)
+integrate = make_rk4(controlled_rhs)
 
 
 @njit(**INLINE)
@@ -334,30 +324,11 @@ def advance_one(nu, y, inputs, par, substeps, work, out):
     ``substeps.count == 0`` only the derivative and tension at (nu, y) are evaluated.
     """
     n = inputs.command.shape[0]
-    args = RhsArgs(inputs, par, work)
-    h = substeps.h
-    n_sub = substeps.count
-    k1 = work.k1
-    stages = (work.k2, work.k3, work.k4, work.tmp)
-    ybuf = work.ybuf
-    tension_min = out.tension_min
-    t = nu
     for j in range(n):
-        tension_min[j] = math.inf
-    # n_sub + 1 evaluations with the tension: at the start of each substep (its k1)
-    # and at the end (the derivative); one loop, so the inlined right-hand side
-    # appears once
-    for i in range(n_sub + 1):
-        dy = k1 if i < n_sub else out.derivative
-        controlled_rhs_tension(t, y, args, dy)
-        for j in range(n):
-            tension_min[j] = min(tension_min[j], work.tension[j])
-        if i == n_sub:
-            break
-        rk4_step(t, y, h, args, k1, stages, ybuf)
-        for j in range(4 * n):
-            y[j] = ybuf[j]
-        t = nu + (i + 1) * h
+        out.tension_min[j] = math.inf
+    args = RhsArgs(inputs, par, work, out.tension_min)
+    t = integrate(nu, y, substeps.h, substeps.count, args,
+                  (work.k1, work.k2, work.k3, work.k4, work.tmp), out.derivative)
     for j in range(n):
         out.tension[j] = work.tension[j]
     return t
