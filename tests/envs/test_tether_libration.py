@@ -413,10 +413,10 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
     assert covered == list(range(obs.shape[0]))  # the table covers every entry once
     nu = info["nu"]
     expected = {
-        "sin(nu), cos(nu)": [math.sin(nu), math.cos(nu)],
+        "sin(nu)": [math.sin(nu)], "cos(nu)": [math.cos(nu)],
         "theta_i": info["theta"], "theta_i'": info["dtheta"],
         "l_i": info["length"], "l_i' (actual reel rates)": info["dlength"],
-        "theta_d, theta_d' (reference)": [info["theta_ref"], info["dtheta_ref"]],
+        "theta_d (reference)": [info["theta_ref"]], "theta_d'": [info["dtheta_ref"]],
         "eccentricity e": [info["eccentricity"]],
     }
     labels = []
@@ -431,9 +431,34 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
             assert masses.sum() == pytest.approx(1.0, abs=1e-6) and np.all(masses > 0)
             continue
         np.testing.assert_allclose(obs[idx], expected[key], rtol=0, atol=1e-6, err_msg=label)
-    assert len(labels) == 8 and labels[-1].startswith("mass fractions")
+    assert len(labels) == 10 and labels[-1].startswith("mass fractions")
     # the masses are drawn within (1 +- 0.2) m_i: the fractions' ratios are bounded
     nominal = np.asarray(env.unwrapped.config.masses)
     ratio = obs[4 * n + 5:] / (nominal / nominal.sum())
     assert ratio.max() / ratio.min() <= 1.2 / 0.8 + 1e-6
     assert not np.allclose(ratio, 1.0, atol=1e-3)  # drawn, not nominal
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"n_bodies": 4, "init_theta_range": 0.1,
+                                         "gravity": "full", "speed_limit": 3.0}])
+def test_env_step_is_the_public_transition(make_env, kwargs):
+    """One env step is tether_gym.physics.transition of the reset state, bit for bit."""
+    from tether_gym.physics import STATE, transition
+
+    env = make_env(**kwargs)
+    cfg = env.unwrapped.config
+    _, info = env.reset(seed=3)
+    state = np.concatenate([info[name] for name in STATE.names])
+    params = cfg.param_rows(cfg.eccentricity, cfg.masses)
+    action = np.linspace(-1.3, 0.7, cfg.n_tethers).astype(np.float32)
+    expected = transition(info["nu"], state,
+                          np.clip(action.astype(np.float64), -1.0, 1.0) * cfg.max_reel_rate,
+                          params, cfg.physics_step, cfg.n_substeps)
+    _, _, _, _, info = env.step(action)
+    assert info["nu"] == expected.nu
+    got = np.concatenate([info[name] for name in STATE.names])
+    assert got.tobytes() == expected.state.tobytes()
+    assert info["tension"].tobytes() == expected.tension.tobytes()
+    assert info["tension_min"].tobytes() == expected.tension_min.tobytes()
+    assert info["ddlength"].tobytes() == expected.derivative[STATE.slices(
+        cfg.n_tethers)["dlength"]].tobytes()

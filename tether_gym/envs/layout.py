@@ -102,15 +102,25 @@ def observation_bounds(n: int, with_params: bool) -> tuple[np.ndarray, np.ndarra
     return low, high
 
 
-def markdown_table(layout: Layout, with_optional: str = "") -> str:
-    """Rows of a markdown table (index range, field, unit) for docstrings."""
-    lines = ["| Index | Field | Unit |", "|---|---|---|"]
+def _offset_text(c0: int, c1: int) -> str:
+    """``c0 + c1 n`` as the docstring tables write it (e.g. ``2n+2``)."""
+    if c1 == 0:
+        return str(c0)
+    term = "n" if c1 == 1 else f"{c1}n"
+    return term if c0 == 0 else f"{term}+{c0}"
+
+
+def markdown_table(layout: Layout, title: str = "Field", keyed: bool = False) -> str:
+    """A markdown table of a layout for docstrings: index range (or key), meaning, unit."""
+    lines = [f"| {'Key' if keyed else 'Index'} | {title} | Unit |", "|---|---|---|"]
     for f in layout:
         c0, c1 = getattr(layout.index, f.name)
-        start = str(c0) if c1 == 0 else (f"{c0} + {c1}n" if c0 else f"{c1}n")
-        if f.per_tether:
-            start += " .. +n-1"
+        if keyed:
+            index = f"``{f.name!r}``" + (" (n,)" if f.per_tether else "")
+        else:
+            index = _offset_text(c0, c1)
+            if f.per_tether:
+                index += " .. " + _offset_text(c0 - 1, c1 + 1)
         note = f" (with {f.optional})" if f.optional else ""
-        lines.append(f"| {start} | {f.doc}{note} | {f.unit} |")
+        lines.append(f"| {index} | {f.doc}{note} | {f.unit} |")
     return "\n".join(lines)
-

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
@@ -11,7 +13,7 @@ from ..physics.layout import at
 from ..physics.state import P
 from .batch import ChainBatch
 from .config import EnvConfig
-from .layout import observation_bounds
+from .layout import INFO, OBSERVATION, markdown_table, observation_bounds
 
 __all__ = ["TetherLibrationEnv"]
 
@@ -80,16 +82,7 @@ class TetherLibrationEnv(gym.Env):
     ``Box(float32)`` of size 4(N-1) + 4, plus N when e and the masses are observed
     (``observe_params``; by default exactly when they are randomised):
 
-    | Index              | Observation                           | Unit      |
-    |--------------------|---------------------------------------|-----------|
-    | 0, 1               | sin(nu), cos(nu): orbital phase       | [-]       |
-    | 2 .. n+1           | theta_i                               | [rad]     |
-    | n+2 .. 2n+1        | theta_i' = d theta_i / d nu           | [rad/rad] |
-    | 2n+2 .. 3n+1       | l_i                                   | [-]       |
-    | 3n+2 .. 4n+1       | l_i' (actual reel rates)              | [-]       |
-    | 4n+2, 4n+3         | theta_d, theta_d' (reference)         | [rad]     |
-    | 4n+4 (observed)    | eccentricity e                        | [-]       |
-    | 4n+5 .. (observed) | mass fractions M_i                    | [-]       |
+    {observation_table}
 
     (n = N-1.) With the frequency w known, (nu, theta, theta', l, l') is the full
     state, so the observation is Markov. ``obs_noise`` adds Gaussian noise of that
@@ -171,14 +164,25 @@ class TetherLibrationEnv(gym.Env):
     | reward_weights       | None           | dict overriding RewardWeights fields            |
     | render_mode          | None           | None, "rgb_array" or "human"                    |
 
+    ## Info
+
+    Every step's and reset's ``info`` holds, in this order (per-tether entries are
+    (n,) arrays):
+
+    {info_table}
+
     ## Version History
 
-    * v0: initial release.
+    * v0: initial release. Since tether_gym 0.2.0 the reel acceleration is computed by
+      one helper for the reels, the reward and ``info["reel_accel"]``: trajectories,
+      observations, terminations and the other info entries are bitwise those of
+      0.1.0; the reward can differ in its last bit (1 ulp) and ``reel_accel`` by
+      a relative 2e-13.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
 
-    def __init__(self, render_mode: str | None = None, **kwargs):
+    def __init__(self, render_mode: str | None = None, **kwargs: Any):
         self.config = EnvConfig.from_kwargs(render_mode=render_mode, **kwargs)
         self.render_mode = self.config.render_mode
         self.action_space = action_space(self.config)
@@ -247,3 +251,13 @@ class TetherLibrationEnv(gym.Env):
     def __repr__(self) -> str:
         return f"TetherLibrationEnv(n_bodies={self.config.n_bodies}, e={self.config.eccentricity})"
 
+
+
+def _indent(text: str) -> str:
+    return text.replace("\n", "\n    ")
+
+
+# the spec sheet's tables come from the layout declarations (tether_gym.envs.layout)
+TetherLibrationEnv.__doc__ = (TetherLibrationEnv.__doc__ or "").format(
+    observation_table=_indent(markdown_table(OBSERVATION, "Observation")),
+    info_table=_indent(markdown_table(INFO, "Entry", keyed=True)))
