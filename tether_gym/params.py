@@ -58,6 +58,7 @@ class Gravity(str, Enum):
 
     @classmethod
     def parse(cls, value: str | Gravity) -> Gravity:
+        """The model named by ``value`` (case-insensitive); TypeError/ValueError otherwise."""
         if isinstance(value, Gravity):
             return value
         if not isinstance(value, str):

@@ -117,30 +117,37 @@ class ChainBatch:
     # views kept for readability (the arrays live in self.rows)
     @property
     def nu(self) -> np.ndarray:
+        """True anomaly of each row [rad], (num,)."""
         return self.rows.nu
 
     @property
     def y(self) -> np.ndarray:
+        """State rows (STATE layout), (num, 4n)."""
         return self.rows.y
 
     @property
     def par(self) -> np.ndarray:
+        """Parameter rows (PARAMS layout), (num, P)."""
         return self.rows.par
 
     @property
     def obs(self) -> np.ndarray:
+        """Observations (OBSERVATION layout), float32 (num, obs_dim)."""
         return self.rows.obs
 
     @property
     def reward(self) -> np.ndarray:
+        """Reward of each row's last step, (num,)."""
         return self.rows.reward
 
     @property
     def failure(self) -> np.ndarray:
+        """Failure code of each row (0 while healthy), int64 (num,)."""
         return self.rows.failure
 
     @property
     def steps(self) -> np.ndarray:
+        """Control steps since each row's reset, int64 (num,)."""
         return self.rows.steps
 
     # ------------------------------------------------------------------ #
@@ -261,7 +268,7 @@ class ChainBatch:
             self._pool = None
 
     def _draw_step_noise(self, rngs, rows) -> None:
-        """This step's disturbance and observation noise of every row (or of ``rows``).
+        """Draw this step's disturbance and observation noise of every row (or of ``rows``).
 
         Row b draws from ``rngs[b]`` exactly what ``uniform(-d, d, n)`` and then
         ``normal(0, sigma, 4n)`` draw: the standard variates go straight into
@@ -283,8 +290,11 @@ class ChainBatch:
             self._scale_noise(sel)
 
     def _scale_noise(self, sel) -> None:
-        """noise = sigma z for the rows ``sel`` (numpy's ``normal(0, sigma)`` of the
-        standard variates z drawn into ``_gauss``)."""
+        """Set noise = sigma z for the rows ``sel``.
+
+        This is numpy's ``normal(0, sigma)`` of the standard variates z drawn into
+        ``_gauss``.
+        """
         self.rows.noise[sel] = self.config.obs_noise * self._gauss[sel]
 
     def truncated(self) -> np.ndarray:

@@ -302,6 +302,7 @@ class EnvConfig:
     # ------------------------------------------------------------------ #
     @property
     def n_tethers(self) -> int:
+        """n = N - 1."""
         return self.n_bodies - 1
 
     @property
@@ -317,6 +318,7 @@ class EnvConfig:
 
     @property
     def n_substeps(self) -> int:
+        """RK4 steps per control step."""
         return self.episode.n_substeps
 
     @property
@@ -346,6 +348,7 @@ class EnvConfig:
 
     @property
     def obs_dim(self) -> int:
+        """Length of one observation (OBSERVATION layout)."""
         return OBSERVATION.size(self.n_tethers, params=self.with_params)
 
     def param_rows(self, eccentricity, masses) -> np.ndarray:

@@ -194,10 +194,12 @@ class TetherLibrationEnv(gym.Env):
 
     @property
     def n_tethers(self) -> int:
+        """n = N - 1."""
         return self.config.n_tethers
 
     @property
     def max_episode_steps(self) -> int:
+        """Control steps per episode of this configuration."""
         return self.config.max_episode_steps
 
     @property
@@ -206,6 +208,7 @@ class TetherLibrationEnv(gym.Env):
         return self.config.model
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Start an episode; ``options`` may fix nu and any state field (see Starting State)."""
         super().reset(seed=seed)
         self._rngs[0] = self.np_random
         self._batch.reset_rows((0,), self._rngs, options)
@@ -215,6 +218,7 @@ class TetherLibrationEnv(gym.Env):
         return self._batch.obs[0].copy(), self._batch.info(0)
 
     def step(self, action):
+        """Advance one control step; see the class docstring."""
         if self._needs_reset:
             raise RuntimeError("call reset() before step() (the episode has ended or not begun)")
         batch = self._batch
@@ -232,6 +236,7 @@ class TetherLibrationEnv(gym.Env):
                 batch.info(0))
 
     def render(self):
+        """The current frame (``rgb_array``) or draw it in a window (``human``)."""
         if self.render_mode is None:
             gym.logger.warn("render() called without a render_mode; pass render_mode="
                             "'rgb_array' or 'human' to gym.make")
@@ -243,6 +248,7 @@ class TetherLibrationEnv(gym.Env):
         return self._renderer.draw(self._batch.info(0), eccentricity_of(self._batch, 0))
 
     def close(self):
+        """Stop worker threads and close the renderer."""
         self._batch.close()
         if self._renderer is not None:
             self._renderer.close()

@@ -163,6 +163,7 @@ class TetherLibrationVectorEnv(VectorEnv):
     # ------------------------------------------------------------------ #
     @property
     def n_tethers(self) -> int:
+        """n = N - 1."""
         return self.config.n_tethers
 
     @property
@@ -292,6 +293,7 @@ class TetherLibrationVectorEnv(VectorEnv):
                      for i in range(self.num_envs))
 
     def close_extras(self, **kwargs: Any) -> None:
+        """Stop worker threads and close the renderer."""
         self._batch.close()
         if self._renderer is not None:
             self._renderer.close()

@@ -39,6 +39,7 @@ class Direct:
         self.__doc__ = dispatcher.__doc__
 
     def __call__(self, *args: Any) -> Any:
+        """Call the compiled function (see the class notes)."""
         entry = self._entry
         if entry is not None:
             return entry(*args)

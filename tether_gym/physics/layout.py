@@ -96,6 +96,7 @@ class Layout:
 
     @property
     def names(self) -> tuple[str, ...]:
+        """Field names in row order."""
         return tuple(f.name for f in self.fields)
 
     def __iter__(self) -> Iterator[Field]:
