@@ -161,6 +161,7 @@ class ChainBatch:
         """
         cfg = self.config
         rnd = cfg.randomisation
+        mass_range = 0.0 if rnd.mass_range is None else rnd.mass_range
         n = self.n
         opts = _check_options(options, n)
         rows = np.asarray(rows, dtype=np.int64)
@@ -173,7 +174,7 @@ class ChainBatch:
             if rnd.eccentricity_range is not None:
                 ecc[i] = rng.uniform(*rnd.eccentricity_range)
             if scale is not None:
-                scale[i] = rng.uniform(1.0 - rnd.mass_range, 1.0 + rnd.mass_range, n)
+                scale[i] = rng.uniform(1.0 - mass_range, 1.0 + mass_range, n)
             unit[i] = rng.uniform(-1.0, 1.0, 3 * n)
             if rnd.obs_noise > 0.0:
                 rng.standard_normal(out=self._gauss_rows[b])

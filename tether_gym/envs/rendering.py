@@ -27,6 +27,7 @@ eccentricity) and the moving artists are blitted onto it.
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -57,12 +58,15 @@ def _has_display() -> bool:
     """True when pyplot's backend can open a window."""
     import matplotlib
 
+    interactive: list[str]
     try:
         from matplotlib.backends import BackendFilter, backend_registry
 
         interactive = backend_registry.list_builtin(BackendFilter.INTERACTIVE)
     except ImportError:  # matplotlib < 3.9
-        from matplotlib.rcsetup import interactive_bk as interactive
+        from matplotlib import rcsetup
+
+        interactive = list(rcsetup.interactive_bk)  # type: ignore[attr-defined]
     return matplotlib.get_backend().lower() in {name.lower() for name in interactive}
 
 
@@ -96,8 +100,8 @@ class ChainRenderer:
         self.config = config
         self.render_mode = render_mode
         self.n = config.n_tethers
-        self._last_ecc = None
-        self._plt = None
+        self._last_ecc: float | None = None
+        self._plt: Any = None
         self._show = False
         if render_mode == "human":
             import matplotlib.pyplot as plt
@@ -115,7 +119,7 @@ class ChainRenderer:
 
             fig = Figure(figsize=(FRAME_SIZE / _DPI, FRAME_SIZE / _DPI), dpi=_DPI)
             FigureCanvasAgg(fig)
-        self.fig = fig
+        self.fig: Any = fig
         self._build()
 
     # ------------------------------------------------------------------ #
@@ -245,8 +249,8 @@ class ChainRenderer:
         ecc = float(eccentricity)
         if ecc != self._last_ecc:
             grid = self._anomaly_grid
-            rad = 1.0 / (1.0 + ecc * np.cos(grid))
-            self._ellipse.set_data(rad * np.cos(grid), rad * np.sin(grid))
+            radii = 1.0 / (1.0 + ecc * np.cos(grid))
+            self._ellipse.set_data(radii * np.cos(grid), radii * np.sin(grid))
             self._last_ecc = ecc
             self._background = None
         rad = 1.0 / (1.0 + ecc * math.cos(nu))
@@ -261,7 +265,7 @@ class ChainRenderer:
             else:
                 self.fig.canvas.draw()
             return None
-        canvas = self.fig.canvas
+        canvas: Any = self.fig.canvas
         if self._background is None:
             canvas.draw()
             self._background = canvas.copy_from_bbox(self.fig.bbox)

@@ -188,7 +188,7 @@ class TetherLibrationEnv(gym.Env):
         self.action_space = action_space(self.config)
         self.observation_space = observation_space(self.config)
         self._batch = ChainBatch(self.config, 1)
-        self._rngs = [None]
+        self._rngs: list[np.random.Generator | None] = [None]
         self._needs_reset = True
         self._renderer = None
 

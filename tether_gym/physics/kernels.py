@@ -80,10 +80,10 @@ class Scratch(NamedTuple):
 
 
 class Substeps(NamedTuple):
-    """How one control step is integrated: ``count`` RK4 steps of ``h`` [rad]."""
+    """How one control step is integrated: ``number`` RK4 steps of ``h`` [rad]."""
 
     h: float
-    count: int
+    number: int
 
 
 class StepInputs(NamedTuple):
@@ -321,13 +321,13 @@ def advance_one(nu, y, inputs, par, substeps, work, out):
     Returns the final true anomaly. ``out`` (:class:`StepOutputs`) receives the
     minimum T^ over the substep boundaries (both ends included), dy/dnu at the
     final state (it holds theta'' and l'') and T^ at the final state. With
-    ``substeps.count == 0`` only the derivative and tension at (nu, y) are evaluated.
+    ``substeps.number == 0`` only the derivative and tension at (nu, y) are evaluated.
     """
     n = inputs.command.shape[0]
     for j in range(n):
         out.tension_min[j] = math.inf
     args = RhsArgs(inputs, par, work, out.tension_min)
-    t = integrate(nu, y, substeps.h, substeps.count, args,
+    t = integrate(nu, y, substeps.h, substeps.number, args,
                   (work.k1, work.k2, work.k3, work.k4, work.tmp), out.derivative)
     for j in range(n):
         out.tension[j] = work.tension[j]
