@@ -190,7 +190,8 @@ class ChainParams:
         l_i(0) = L_i(0) / L0 [-], each > 0, one per tether. Table 1: (0.5, 0.5).
     total_tether_length : float
         L0 [m], the initial total tether length, > 0. The paper gives none; 20 km
-        reproduces its Sec. 4.3 results (shared/paper/NOTES.md).
+        reproduces its Sec. 4.3 results
+        (docs/model.md#parameters-the-paper-does-not-give).
     gravity : Gravity or str
         ``"gradient"`` (default) or ``"full"``.
     """

@@ -206,7 +206,7 @@ def test_zero_state_error_is_bounded_by_the_control_step():
     Derivation. Write g(nu) = e sin(nu)/k, so Eq. 7 is l_i' = l_i g. (1) If every tether
     reels at the same relative rate rho = l_i'/l_i, an aligned chain stays aligned (all
     bodies sit on one line that is scaled uniformly, so the tensions, along that line,
-    have no component across it) and its angle obeys the one-tether equation of NOTES.md:
+    have no component across it) and its angle obeys the one-tether equation of docs/model.md:
     theta'' = -2 (rho - g)(1 + theta') - 3 sin(2 theta)/(2k). (2) The env applies the
     law as a zero-order hold: over [nu_k, nu_k + h_c) the command is l_i(nu_k) g(nu_k),
     i.e. the exact rate l'_ex = l g delayed by h_c/2 on average plus a zero-mean

@@ -3,7 +3,7 @@
 What is checked, against what:
 
 * the paper's zero state (Sec. 3.1, Eq. 7, Table 1), integrated over three orbits;
-* the single-tether equation and tension stated in shared/paper/NOTES.md (N = 2);
+* the single-tether equation and tension stated in docs/model.md#check-a-single-tether (N = 2);
 * an independent Cartesian Newton formulation with constraint forces
   (``newton_reference.py``) for 1, 2, 3 and 5 tethers and both gravity models;
 * the control-affine split theta'' = f + B l' + D l'' and its structure;
@@ -53,7 +53,7 @@ def test_zero_state_table1_three_orbits():
     """Eq. 7's reel law keeps theta = 0 exactly; l and T^ follow the closed forms.
 
     Table 1 (masses (1, 2), l(0) = (0.5, 0.5), e = 0.2), theta = theta' = 0 at
-    nu = 0, RK4 with h = 0.001 over three orbits. Expected (NOTES.md):
+    nu = 0, RK4 with h = 0.001 over three orbits. Expected (docs/model.md#zero-state-eq-7):
     l = l(0)(1+e)/(1+e cos nu) peaking at 0.75 at nu = pi; T^_1 = 3/k^2,
     T^_2 = 2.4/k^2.
     """
@@ -98,12 +98,12 @@ def test_zero_state_table1_three_orbits():
 
 
 # --------------------------------------------------------------------------- #
-# 2. N = 2 reduces to NOTES.md's single-tether equations
+# 2. N = 2 reduces to docs/model.md's single-tether equations
 # --------------------------------------------------------------------------- #
 @pytest.mark.parametrize("e", [0.0, 0.2, 0.7])
 @pytest.mark.parametrize("mass", [1.0, 350.0])
 def test_single_tether_matches_notes(e, mass):
-    """theta'' and T^ equal NOTES.md's N = 2 formulas on random states (1e-12).
+    """theta'' and T^ equal docs/model.md's N = 2 formulas on random states (1e-12).
 
     theta'' = -2 (l'/l - e sin(nu)/k)(1 + theta') - 3 sin(2 theta) / (2k),
     T^ = M [ l (1+theta')^2 + l (3 cos^2 theta - 1)/k + 2 e sin(nu) l'/k - l'' ],
@@ -169,7 +169,7 @@ def test_control_affine_structure(n, gravity):
     """Aligned chain: D = 0 and B = diag(-2 (1 + theta_k') / l_k); otherwise both full.
 
     For theta_1 = ... = theta_n the theta-equations decouple per tether
-    (NOTES.md, "Structure"), which gives the diagonal B above (the N = 2 coefficient
+    (docs/model.md#control-affine-form), which gives the diagonal B above (the N = 2 coefficient
     of l'). For a non-aligned chain D and the off-diagonal part of B are non-zero.
     """
     rng = np.random.default_rng(3 * n)

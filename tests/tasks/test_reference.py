@@ -152,7 +152,7 @@ def test_eq10_state_feedback_tracks_periodic_solution():
     assert np.max(np.abs(traj[:, :, n:2 * n] - target_rate)) < 1e-8
     length = traj[:, :, 2 * n:]
     assert np.all(length > 0.0)
-    # reel magnitude (swing of l_1 + l_2 over the run, per unit L0): NOTES.md quotes
+    # reel magnitude (swing of l_1 + l_2 over the run, per unit L0): docs/model.md quotes
     # about 22 %, 3 % and 19 % for A = 0.1, 0.2, 0.3 (the paper: 24 %, 2 %, 18 %)
     swing = np.ptp(length.sum(axis=2), axis=0)
     np.testing.assert_allclose(swing, [0.22, 0.035, 0.19], rtol=0.0, atol=0.01)
@@ -232,7 +232,7 @@ def test_tension_polynomial_is_last_tension_at_apogee(masses):
 
 
 def test_tension_polynomial_sign_versus_orbit_minimum():
-    """NOTES.md: the polynomial's sign is that of the orbit-minimum last tension up to
+    """docs/model.md: the polynomial's sign is that of the orbit-minimum last tension up to
     e = 0.5, and it is slightly too permissive at e = 0.7 (Table 1 chain)."""
     chain_nu = np.linspace(0.0, 2.0 * np.pi, 2001)  # includes apogee
     amps = np.arange(0.02, 0.99, 0.02)

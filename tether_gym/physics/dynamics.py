@@ -148,7 +148,7 @@ class TetherChain:
         return self._accel(nu, theta, dtheta, length, dlength, ddlength)
 
     def control_affine(self, nu, theta, dtheta, length):
-        """Exact split theta'' = f + B l' + D l'' (NOTES.md, "Structure").
+        """Exact split theta'' = f + B l' + D l'' (docs/model.md#control-affine-form).
 
         Returns
         -------

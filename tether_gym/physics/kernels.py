@@ -5,8 +5,8 @@ vector environment, the sliding-mode controller through ``control_affine``) call
 these functions. They work on one state at a time inside loops over a leading batch
 axis, so there is no per-state Python overhead.
 
-Model and notation (Shi, Zhu & Zhu 2019, Sec. 2; shared/paper/NOTES.md)
------------------------------------------------------------------------
+Model and notation (Shi, Zhu & Zhu 2019, Sec. 2; docs/model.md#equations-of-motion)
+-----------------------------------------------------------------------------------
 Orbital frame (e_r radial outward, e_v along-track). Tether j (j = 1..n, n = N-1)
 joins body j-1 to body j; its direction is e_j = (cos th_j, sin th_j) in (e_r, e_v)
 components, pointing from body j to body j-1, so body i sits at
@@ -38,7 +38,7 @@ The theta-equations are A th'' + b0 + P l' + Q l'' = 0 with A_jk = Mt_jk l_k c_j
 P_jk = Mt_jk (2 w_k c_jk - q s_jk), Q_jk = Mt_jk s_jk, hence
 th'' = f + B l' + D l'' with f = -A^-1 b0, B = -A^-1 P, D = -A^-1 Q.
 diag(l) A is the (symmetric positive definite) mass matrix of the angles, so the
-solve needs no pivoting. For N = 2 this reduces to NOTES.md's single-tether
+solve needs no pivoting. For N = 2 this reduces to the single-tether
 equation th'' = -2 (l'/l - e sin(nu)/k)(1 + th') - 3 sin(2 th) / (2k).
 
 The state row y and the parameter row par are laid out as declared in

@@ -63,7 +63,7 @@ def zero_state_length(nu, length0, e, nu0=0.0):
 
 
 def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
-    """Paper Eq. 10 as corrected in NOTES.md, for an aligned chain on theta = A sin(w nu).
+    """Paper Eq. 10 as corrected (docs/model.md#periodic-reference-eqs-8-10), for an aligned chain on theta = A sin(w nu).
 
     l_i' = l_i [4 e sin(nu)(1 + theta') + 2 A k w^2 sin(w nu) - 3 sin(2 theta)]
            / (4 k (1 + theta'))
@@ -84,7 +84,7 @@ def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
 
 
 def periodic_length_small_amplitude(nu, length0, e, amplitude):
-    """Paper Eq. 11a (NOTES.md form): small-A integral of Eq. 10 for w = 1.
+    """Paper Eq. 11a (docs/model.md#small-amplitude-closed-form-eqs-11a-11b): small-A integral of Eq. 10 for w = 1.
 
     ln(l/l0) = {(2A+e)[ln(1+A cos nu) - ln(1+A)] + (2e-5A)[ln(1+e cos nu) - ln(1+e)]}
                / (2 (A - e)),
@@ -110,7 +110,8 @@ def periodic_length_small_amplitude(nu, length0, e, amplitude):
 
 
 def tension_positivity_polynomial(e, amplitude):
-    """Sec. 3.2's condition for T^_{N-1} > 0 (the last tether at apogee, NOTES.md).
+    """Sec. 3.2's condition for T^_{N-1} > 0 (the last tether at apogee,
+    docs/model.md#tension-positivity-sec-32).
 
     6 - 12A + 6A^2 - 2A^3 - 6e + 15Ae - 12A^2 e + 4A^3 e - 3Ae^2 + 6A^2 e^2 - 2A^3 e^2;
     the paper requires it to be > 0.
