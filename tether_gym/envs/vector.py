@@ -9,6 +9,7 @@ driven the same way.
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 import numpy as np
@@ -21,6 +22,7 @@ from ..physics import TetherChain
 from .batch import ChainBatch, _check_options
 from .config import EnvConfig
 from .tether_libration import action_space, observation_space
+from .threads import ThreadPolicy
 
 __all__ = ["TetherLibrationVectorEnv"]
 
@@ -58,7 +60,8 @@ def _check_reset_mask(mask, num_envs: int) -> np.ndarray:
 
 
 PARALLEL_MIN_ENVS = 128
-"""From this many sub-envs on, ``parallel="auto"`` steps them on numba's threads."""
+"""From this many sub-envs on, ``parallel="auto"`` considers numba's threads: it times
+serial and threaded steps now and then and uses the faster (:mod:`.threads`)."""
 
 
 class TetherLibrationVectorEnv(VectorEnv):
@@ -115,9 +118,11 @@ class TetherLibrationVectorEnv(VectorEnv):
     "rgb_array"; ``render()`` returns one frame per sub-env), ``parallel`` (False:
     one thread; True: spread the sub-envs over numba's threads, ``NUMBA_NUM_THREADS``
     or ``numba.set_num_threads``; "auto", the default: threads from
-    ``PARALLEL_MIN_ENVS`` = 128 sub-envs on, where they pay on idle cores (see
-    bench/README.md); the results are bitwise the same either way) and every keyword
-    argument of the single env.
+    ``PARALLEL_MIN_ENVS`` = 128 sub-envs on, whichever of one thread and numba's
+    threads measured faster lately, since threads pay on idle cores but can be many
+    times slower when another process shares them (see :mod:`tether_gym.envs.threads`
+    and bench/threads_under_load.py); the results are bitwise the same either way)
+    and every keyword argument of the single env.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30,
@@ -187,19 +192,11 @@ class TetherLibrationVectorEnv(VectorEnv):
         return self._rngs[i]
 
     def _n_chunks(self, rows: int) -> int:
-        """Chunks for the threaded kernel (a few per thread), 0 for the serial one."""
-        if not self.parallel or rows < 2:
-            return 0
-        if self.parallel == "auto" and rows < PARALLEL_MIN_ENVS:
-            # decide before asking numba: get_num_threads() launches its thread pool,
-            # whose idle OpenMP workers spin and take half a core from the caller
-            return 0
-        import numba
-
-        threads = numba.get_num_threads()
-        if self.parallel == "auto" and threads < 2:
-            return 0
-        return min(4 * threads, rows)
+        """Chunks for the threaded kernel, 0 for the serial one (the env's ThreadPolicy)."""
+        policy = self.__dict__.get("_threads")
+        if policy is None:
+            policy = self._threads = ThreadPolicy(self.parallel, PARALLEL_MIN_ENVS)
+        return policy.chunks(rows)
 
     # ------------------------------------------------------------------ #
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -243,11 +240,16 @@ class TetherLibrationVectorEnv(VectorEnv):
         if done.any():
             rows = np.flatnonzero(~done)
             if len(rows):
-                batch.step(a, self._rngs, rows, self._n_chunks(len(rows)))
+                chunks = self._n_chunks(len(rows))
+                start = time.perf_counter()
+                batch.step(a, self._rngs, rows, chunks)
+                self._threads.record(len(rows), time.perf_counter() - start)
             batch.reset_rows(np.flatnonzero(done), self._rngs)
         else:
             chunks = self._n_chunks(self.num_envs)
+            start = time.perf_counter()
             batch.step(a, self._rngs, None if chunks == 0 else self._all_rows, chunks)
+            self._threads.record(self.num_envs, time.perf_counter() - start)
         # reset rows have failure 0, steps 0 and nu < nu_end: neither flag is set for them
         terminated = batch.failure != 0
         truncated = batch.truncated() & ~terminated
