@@ -77,21 +77,21 @@ def test_threads_that_pay_are_used_almost_always(ratio):
     assert out["time"] < 1.01 * ratio * ROWS * 20000
 
 
-@pytest.mark.parametrize("ratio", [0.95, 1.5, 18.0])
+@pytest.mark.parametrize("ratio", [0.95, 1.5, 18.0, 150.0])
 def test_threads_that_do_not_pay_cost_little(ratio):
-    """Threads 5 % faster (inside the margin), 1.5x or 18x slower: serial wins; the
-    probes cost a few percent of the all-serial time."""
+    """Threads 5 % faster (inside the margin), 1.5x, 18x or 150x slower (measured under
+    load): serial wins; the probes cost a few percent of the all-serial time."""
     policy = ThreadPolicy("auto", 128, num_threads=lambda: 2)
     steps = 20000
     out = run(policy, fixed(1.0, ratio), steps)
     serial_time = 1.0 * ROWS * steps
     assert policy.summary()["choice"] == "serial"
-    assert out["time"] < serial_time * (1.0 + 0.003 * ratio)
+    assert out["time"] < 1.05 * serial_time
 
 
 def test_probe_intervals_double_while_the_choice_holds():
     policy = ThreadPolicy("auto", 128, num_threads=lambda: 2, probe_steps=1,
-                          first_interval=4, max_interval=32)
+                          first_interval=4, max_interval=32, budget=1.0)
     modes = run(policy, fixed(1.0, 0.5), 106)["modes"]
     # untimed T (0), S (1); then probes (S, T) followed by 4, 8, 16, 32, 32 threaded steps
     serial_at = [i for i, threaded in enumerate(modes) if not threaded]
@@ -111,15 +111,14 @@ def test_a_second_job_is_noticed_within_a_few_steps():
     out = run(policy, cost, 6000)
     after = out["modes"][3000:]
     assert after[:3] == [True] * 3  # the three strikes
-    slow_threaded_before_switch = after.index(False)
-    assert slow_threaded_before_switch == 3
-    # the probe: 3 serial, 3 threaded, then serial holds; later probes are rare
-    assert after[3:9] == [False] * 3 + [True] * 3
-    # later probes back off: intervals 16, 32, ..., 2048 fit 8 probes in 3000 steps
-    assert sum(after) == 3 + 3 * 8
+    # the probe: 3 serial steps, then one threaded step 4.5x slower ends it
+    assert after[3:8] == [False] * 3 + [True] + [False]
+    # later probes: that step cost 3.5 serial steps too many; with a 2 % budget the
+    # next probe comes 175 steps later, then the interval doubles
+    assert [i for i, t in enumerate(after) if t] == [0, 1, 2, 6, 185, 539, 1243, 2647]
     loaded_serial_time = 2.0 * ROWS * 3000
     time_after = sum((9.0 if t else 2.0) * ROWS for t in after)
-    assert time_after < 1.05 * loaded_serial_time
+    assert time_after < 1.02 * loaded_serial_time
     assert policy.summary()["choice"] == "serial"
 
 
@@ -152,7 +151,7 @@ def test_a_step_without_record_restarts_the_probe():
 @pytest.mark.parametrize("kwargs, match", [
     ({"min_rows": 0}, "min_rows"), ({"probe_steps": 0}, "probe_steps"),
     ({"first_interval": 8, "max_interval": 4}, "max_interval"), ({"margin": 1.5}, "margin"),
-    ({"alarm": 1.0}, "alarm"), ({"alarm_steps": 0}, "alarm_steps"),
+    ({"alarm": 1.0}, "alarm"), ({"alarm_steps": 0}, "alarm_steps"), ({"budget": 0}, "budget"),
 ])
 def test_bad_settings_are_rejected(kwargs, match):
     args = {"min_rows": 128, **kwargs}

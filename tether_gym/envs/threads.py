@@ -10,12 +10,15 @@ than the serial one (bench/threads_under_load.py). No static rule knows which ca
 is in, so :class:`ThreadPolicy` measures:
 
 * **probe**: a few serial steps, then as many threaded steps; the median time per row
-  of each is compared;
+  of each is compared. A threaded step slower than ``alarm`` times the serial median
+  ends the probe at once (one such step says enough, and under load it can cost as
+  much as a hundred serial steps);
 * **exploit**: the winner runs for an interval of steps. Threads must be at least
   ``1 - margin`` (10 %) faster to win, since the serial kernel leaves the other core
   alone. The interval doubles each time a probe confirms the previous choice (from
-  ``first_interval`` up to ``max_interval`` steps) and drops back when the choice flips,
-  so a steady machine costs a probe now and then;
+  ``first_interval`` up to ``max_interval`` steps) and drops back when the choice flips;
+  it is also long enough that the probe's steps of the losing mode cost at most
+  ``budget`` (2 %) of the time, so a steady machine pays a probe now and then;
 * **alarm**: while threaded, ``alarm_steps`` steps in a row slower than ``alarm`` times
   the probe's median end the interval at once (a second job has started).
 
@@ -72,20 +75,26 @@ class ThreadPolicy:
         Timed steps of each mode per probe (the median counts) [-].
     first_interval, max_interval : int
         Shortest and longest run of the chosen mode between probes [steps].
+    budget : float
+        Largest share of the time the losing mode's probe steps may cost: the interval
+        after a probe is at least their excess time over the winner's, divided by
+        ``budget`` (up to ``max_interval``) [-].
     margin : float
         Threads win when their median time per row is below ``margin`` times the
         serial one [-].
     alarm : float
         While threaded, a step slower than ``alarm`` times the probe's threaded median
-        (per row) is a strike [-].
+        (per row) is a strike; in a probe, a threaded step slower than ``alarm`` times
+        the serial median ends the probe [-].
     alarm_steps : int
         Strikes in a row that end the interval and start a probe [-].
     """
 
     def __init__(self, parallel: bool | str, min_rows: int, *,
                  num_threads: Callable[[], int] | None = None, probe_steps: int = 3,
-                 first_interval: int = 16, max_interval: int = 4096, margin: float = 0.9,
-                 alarm: float = 2.0, alarm_steps: int = 3):
+                 first_interval: int = 16, max_interval: int = 1 << 16,
+                 budget: float = 0.02, margin: float = 0.9, alarm: float = 2.0,
+                 alarm_steps: int = 3):
         if not (parallel is True or parallel is False or parallel == "auto"):
             raise TypeError(f"parallel={parallel!r} must be True, False or 'auto'")
         for name, value, low in (("min_rows", min_rows, 1), ("probe_steps", probe_steps, 1),
@@ -97,6 +106,8 @@ class ThreadPolicy:
                 or max_interval < first_interval:
             raise ValueError(f"max_interval={max_interval!r} must be an int >= "
                              f"first_interval={first_interval}")
+        if not 0.0 < budget <= 1.0:
+            raise ValueError(f"budget={budget!r} must be in (0, 1]")
         if not 0.0 < margin <= 1.0:
             raise ValueError(f"margin={margin!r} must be in (0, 1]")
         if not alarm > 1.0:
@@ -107,6 +118,7 @@ class ThreadPolicy:
         self.probe_steps = probe_steps
         self.first_interval = first_interval
         self.max_interval = max_interval
+        self.budget = budget
         self.margin = margin
         self.alarm = alarm
         self.alarm_steps = alarm_steps
@@ -156,6 +168,9 @@ class ThreadPolicy:
             return
         if self._probing:
             self._samples[mode].append(per_row)
+            serial = self._samples[SERIAL]
+            if mode == THREADED and serial and per_row > self.alarm * _median(serial):
+                self._plan.clear()  # threads lose by far: no need to pay for more
             if not self._plan:
                 self._decide()
             return
@@ -205,9 +220,14 @@ class ThreadPolicy:
         self.last_ratio = threaded / serial if serial > 0 else float("inf")
         choice = THREADED if threaded < self.margin * serial else SERIAL
         if choice == self._choice:
-            self._interval = min(2 * self._interval, self.max_interval)
+            interval = min(2 * self._interval, self.max_interval)
         else:
-            self._interval = self.first_interval
+            interval = self.first_interval
+        # the probe's steps of the losing mode, in excess of the winner's time
+        best = threaded if choice == THREADED else serial
+        lost = sum(max(t / best - 1.0, 0.0) for t in self._samples[1 - choice]) \
+            if best > 0 else float("inf")
+        self._interval = int(min(max(interval, lost / self.budget), self.max_interval))
         self._choice = choice
         self._left = self._interval
         self._reference = threaded

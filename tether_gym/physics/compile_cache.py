@@ -11,7 +11,7 @@ function compiled with ``cache=True`` in a file of the tether_gym package:
   every ``.py`` file of the package (paths and contents) and ``tether_gym.__version__``.
   Any edit of any package source, and any upgrade or downgrade, invalidates every cached
   kernel; numba then recompiles and overwrites the cache files. Hashing the ~140 kB of
-  source takes about a millisecond, once per process.
+  source takes about 2 ms, once per process.
 * **Place.** The first writable one of: ``NUMBA_CACHE_DIR`` (if set), the package's own
   ``__pycache__`` directories, ``$XDG_CACHE_HOME/tether_gym`` (default
   ``~/.cache/tether_gym``). Writability is tested by creating a file (permission bits
@@ -24,8 +24,8 @@ function compiled with ``cache=True`` in a file of the tether_gym package:
   A warm cache compiles nothing and prints nothing.
 
 The mechanism uses numba internals that exist in numba 0.59 to 0.68
-(``numba.core.caching``: ``_CacheLocator``, ``CacheImpl._locator_classes`` (named
-``_CacheImpl`` before 0.62), ``numba.core.dispatcher.Dispatcher.enable_caching``) and the
+(``numba.core.caching``: ``_CacheLocator``, ``CacheImpl._locator_classes`` (``_CacheImpl``
+in older releases), ``numba.core.dispatcher.Dispatcher.enable_caching``) and the
 public event API ``numba.core.event``. If they are missing, the kernels are compiled in
 memory with a :class:`CompileCacheWarning` instead of risking a stale cache.
 """
@@ -122,7 +122,8 @@ def find_cache_dir(package_dir: str, environ=None) -> tuple[str | None, str | No
     if xdg and os.path.isabs(xdg):
         user_dir = os.path.join(xdg, "tether_gym")
     else:
-        user_dir = os.path.join(os.path.expanduser("~"), ".cache", "tether_gym")
+        home = env.get("HOME") or os.path.expanduser("~")
+        user_dir = os.path.join(home, ".cache", "tether_gym")
     tried.append(user_dir)
     if writable(user_dir):
         return "user", user_dir, tried
