@@ -150,7 +150,8 @@ class ChainRenderer:
         ax.text(0.0, -1.27 * reach, "local vertical, Earth \u2193", ha="center", va="top",
                 fontsize=7, color="0.4")
         (self._ref_line,) = ax.plot([], [], ls="--", lw=1.0, color=_REF_COLOUR)
-        # tension colour scale: the zero state's T^_1 = 3 / k^2 (Table 1, docs/model.md#zero-state-eq-7)
+        # tension colour scale: the zero state's T^_1 = 3 / k^2 (Table 1,
+        # docs/model.md#zero-state-eq-7)
         # peaks at apogee at 3 / (1-e)^2; the scale runs to 4 / (1-e)^2 for the
         # largest eccentricity of the configuration
         e_hi = cfg.eccentricity_range[1] if cfg.eccentricity_range else cfg.eccentricity

@@ -9,7 +9,7 @@ driven the same way.
 
 from __future__ import annotations
 
-import os
+import time
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,7 @@ from ..physics import TetherChain
 from .batch import ChainBatch, _check_options
 from .config import EnvConfig
 from .tether_libration import action_space, eccentricity_of, observation_space
+from .threads import ThreadPolicy
 
 __all__ = ["TetherLibrationVectorEnv"]
 
@@ -59,7 +60,8 @@ def _check_reset_mask(mask, num_envs: int) -> np.ndarray:
 
 
 PARALLEL_MIN_ENVS = 128
-"""From this many sub-envs on, ``parallel="auto"`` steps them on numba's threads."""
+"""From this many sub-envs on, ``parallel="auto"`` considers threads: it times
+serial and threaded steps now and then and uses the faster (:mod:`.threads`)."""
 
 
 class TetherLibrationVectorEnv(VectorEnv):
@@ -114,11 +116,13 @@ class TetherLibrationVectorEnv(VectorEnv):
 
     ``num_envs`` (>= 1), ``max_episode_steps`` (see above), ``render_mode`` (None or
     "rgb_array"; ``render()`` returns one frame per sub-env), ``parallel`` (False:
-    one thread; True: spread the sub-envs over numba's threads, ``NUMBA_NUM_THREADS``
-    or ``numba.set_num_threads``; "auto", the default: threads from
-    ``PARALLEL_MIN_ENVS`` = 128 sub-envs on, where they pay on idle cores (see
-    bench/README.md); the results are bitwise the same either way) and every keyword
-    argument of the single env.
+    one thread; True: split the sub-envs into one chunk per core the process may use,
+    each stepped by its own thread; "auto", the default: from ``PARALLEL_MIN_ENVS`` =
+    128 sub-envs on, whichever of one thread and the threads measured faster lately,
+    since threads pay on idle cores but can be many times slower when another process
+    shares them (see :mod:`tether_gym.envs.threads`
+    and bench/threads_under_load.py); the results are bitwise the same either way)
+    and every keyword argument of the single env.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30,
@@ -189,16 +193,11 @@ class TetherLibrationVectorEnv(VectorEnv):
         return self._rngs[i]
 
     def _n_chunks(self, rows: int) -> int:
-        """Threads for the step (one chunk of rows each), 0 for the serial step."""
-        if not self.parallel or rows < 2:
-            return 0
-        if self.parallel == "auto" and rows < PARALLEL_MIN_ENVS:
-            return 0
-        threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (
-            os.cpu_count() or 1)
-        if threads < 2:
-            return 0
-        return min(threads, rows)
+        """Threads for the next step (one chunk of rows each), 0 for the serial step."""
+        policy = self.__dict__.get("_threads")
+        if policy is None:
+            policy = self._threads = ThreadPolicy(self.parallel, PARALLEL_MIN_ENVS)
+        return policy.chunks(rows)
 
     # ------------------------------------------------------------------ #
     def reset(self, *, seed: int | list[int | None] | None = None,
@@ -242,11 +241,16 @@ class TetherLibrationVectorEnv(VectorEnv):
         if done.any():
             rows = np.flatnonzero(~done)
             if len(rows):
-                batch.step(a, self._rngs, rows, self._n_chunks(len(rows)))
+                chunks = self._n_chunks(len(rows))
+                start = time.perf_counter()
+                batch.step(a, self._rngs, rows, chunks)
+                self._threads.record(len(rows), time.perf_counter() - start)
             batch.reset_rows(np.flatnonzero(done), self._rngs)
         else:
             chunks = self._n_chunks(self.num_envs)
+            start = time.perf_counter()
             batch.step(a, self._rngs, None if chunks == 0 else self._all_rows, chunks)
+            self._threads.record(self.num_envs, time.perf_counter() - start)
         # reset rows have failure 0, steps 0 and nu < nu_end: neither flag is set for them
         terminated = batch.failure != 0
         truncated = batch.truncated() & ~terminated

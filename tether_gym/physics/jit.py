@@ -14,12 +14,25 @@ it touches (the scratch comes from :func:`tether_gym.physics.kernels.make_scratc
 
 ``INLINE``: ``KERNEL`` inlined into the caller at numba IR level (the small hot
 helpers); an inlined function runs under its caller's options.
+
+Importing this module installs :mod:`tether_gym.physics.compile_cache`, before any
+kernel is decorated: every ``cache=True`` function of the package is then cached under
+one key, a hash of the whole package source and its version, so an edit of any file
+(a helper inlined from another file included) or an upgrade recompiles it; without a
+writable cache directory the kernels are compiled in memory, with one warning.
 """
 
 from __future__ import annotations
 
-__all__ = ["KERNEL", "LOOP", "INLINE"]
+from typing import Any
 
-KERNEL = {"cache": True, "error_model": "numpy"}
-LOOP = {**KERNEL, "_nrt": False}
-INLINE = {**KERNEL, "inline": "always"}
+from . import compile_cache
+
+__all__ = ["KERNEL", "LOOP", "INLINE", "CACHE"]
+
+CACHE = compile_cache.install()
+"""Where and under which key the kernels are cached (:class:`~.compile_cache.CacheState`)."""
+
+KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy"}
+LOOP: dict[str, Any] = {**KERNEL, "_nrt": False}
+INLINE: dict[str, Any] = {**KERNEL, "inline": "always"}

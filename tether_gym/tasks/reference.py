@@ -63,7 +63,9 @@ def zero_state_length(nu, length0, e, nu0=0.0):
 
 
 def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
-    """Paper Eq. 10 as corrected (docs/model.md#periodic-reference-eqs-8-10), for an aligned chain on theta = A sin(w nu).
+    """Paper Eq. 10 as corrected, for an aligned chain on theta = A sin(w nu).
+
+    (docs/model.md#periodic-reference-eqs-8-10)
 
     l_i' = l_i [4 e sin(nu)(1 + theta') + 2 A k w^2 sin(w nu) - 3 sin(2 theta)]
            / (4 k (1 + theta'))
@@ -84,7 +86,9 @@ def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
 
 
 def periodic_length_small_amplitude(nu, length0, e, amplitude):
-    """Paper Eq. 11a (docs/model.md#small-amplitude-closed-form-eqs-11a-11b): small-A integral of Eq. 10 for w = 1.
+    """Paper Eq. 11a: small-A integral of Eq. 10 for w = 1.
+
+    (docs/model.md#small-amplitude-closed-form-eqs-11a-11b)
 
     ln(l/l0) = {(2A+e)[ln(1+A cos nu) - ln(1+A)] + (2e-5A)[ln(1+e cos nu) - ln(1+e)]}
                / (2 (A - e)),
