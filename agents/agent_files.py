@@ -10,10 +10,12 @@ An agent is one folder (a *unit*) with two files:
     ``clip_obs``, ``epsilon``; ``null`` when observations are not normalised), the env
     id and env kwargs the agent was trained on, the training seed and steps, and the
     name and SHA-256 of the weights file.
-``policy.pt``
-    The policy's ``state_dict`` (tensors only), written by ``torch.save`` and read by
-    ``torch.load(..., weights_only=True)``, which builds tensors and plain containers
-    and refuses any other object.
+``policy.safetensors``
+    The policy's ``state_dict`` in the safetensors format: a JSON header (names,
+    dtypes, shapes, offsets) followed by raw tensor bytes. Reading it builds tensors
+    and nothing else; there is no pickle in it, unlike ``torch.save`` files, whose
+    ``weights_only`` unpickler has had code-execution holes (CVE-2025-32434 in torch
+    <= 2.5.1, CVE-2026-24747 in torch < 2.10).
 
 Loading rebuilds the policy from ``agent.json`` (``policy_class(observation_space,
 action_space, lr_schedule, **policy_kwargs)``; classes are looked up by name in a fixed
@@ -41,7 +43,7 @@ __all__ = ["AgentLoadError", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT", "FORMAT_VER
            "PICKLED_MODEL_FILES"]
 
 AGENT_FILE = "agent.json"
-WEIGHTS_FILE = "policy.pt"
+WEIGHTS_FILE = "policy.safetensors"
 FORMAT = "tether_gym-agent"
 FORMAT_VERSION = 1
 PICKLED_MODEL_FILES = ("best_model.zip", "final_model.zip", "model.zip")
@@ -151,6 +153,15 @@ def _settings_from_json(data: dict) -> dict:
     return out
 
 
+def _safetensors():
+    try:
+        import safetensors.torch
+    except ImportError:
+        raise ImportError("agent files need safetensors: pip install safetensors (or "
+                          "pip install -e \".[train]\")") from None
+    return safetensors.torch
+
+
 def _sha256(path: Path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as fh:
@@ -181,7 +192,7 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     Parameters
     ----------
     path : path-like
-        The agent folder (created; ``agent.json`` and ``policy.pt`` are replaced).
+        The agent folder (created; ``agent.json`` and ``policy.safetensors`` are replaced).
     policy : stable_baselines3 policy
         ``model.policy`` of a PPO or SAC model.
     algo : {"ppo", "sac"}
@@ -201,8 +212,6 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     Path
         The agent folder.
     """
-    import torch
-
     algo = algo.lower()
     if algo not in _WEIGHTS_MODULE:
         raise ValueError(f"algo={algo!r} must be one of {sorted(_WEIGHTS_MODULE)}")
@@ -215,8 +224,8 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     module = policy if _WEIGHTS_MODULE[algo] == "policy" else policy.actor
     state = {k: v.detach().cpu().clone() for k, v in module.state_dict().items()}
     weights = path / WEIGHTS_FILE
-    tmp = weights.with_suffix(".pt.tmp")
-    torch.save(state, tmp)
+    tmp = path / (WEIGHTS_FILE + ".tmp")
+    _safetensors().save_file(state, str(tmp), metadata={"format": FORMAT, "algo": algo})
     tmp.replace(weights)
     norm = None
     if obs_rms is not None:
@@ -283,8 +292,6 @@ def load_agent(path):
     """
     import importlib
 
-    import torch
-
     path = Path(path)
     meta_path = path / AGENT_FILE
     if not meta_path.is_file():
@@ -330,8 +337,8 @@ def load_agent(path):
     except TypeError as exc:
         raise AgentLoadError(f"{meta_path}: policy_kwargs do not fit {cls_name}: {exc}") from None
     try:
-        state = torch.load(weights, map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - weights_only refuses anything but tensors
+        state = _safetensors().load_file(str(weights), device="cpu")
+    except Exception as exc:  # noqa: BLE001 - SafetensorError, OSError, ...
         raise AgentLoadError(f"cannot read weights {weights}: {exc}") from None
     target = policy if weights_info["module"] == "policy" else policy.actor
     try:
@@ -491,7 +498,7 @@ def main(argv=None) -> int:
                                      description="Convert a stable-baselines3 run folder "
                                                  "(pickles) to a safe agent folder.")
     sub = parser.add_subparsers(dest="cmd", required=True)
-    conv = sub.add_parser("convert", help="write agent.json + policy.pt from a run folder")
+    conv = sub.add_parser("convert", help="write agent.json + policy.safetensors from a run folder")
     conv.add_argument("run", type=Path, help="run folder or model .zip")
     conv.add_argument("--out", type=Path, default=None,
                       help="agent folder (default: RUN/best_agent or RUN/final_agent)")

@@ -1,7 +1,7 @@
 """Load a trained agent as a policy with the common ``predict``.
 
 An agent is a folder in the safe format of :mod:`tether_gym_agents.agent_files`
-(``agent.json`` + ``policy.pt``: tensors and plain data only, so loading never runs
+(``agent.json`` + ``policy.safetensors``: tensors and plain data only, so loading never runs
 code). ``TrainedAgent.load`` accepts such a folder, a run folder written by
 ``train.py`` (it loads ``best_agent/``, else ``final_agent/``) or the ``agent.json``
 file itself. stable-baselines3's pickled files (``*.zip``, ``vecnormalize.pkl``) are
@@ -97,7 +97,7 @@ class TrainedAgent:
         Parameters
         ----------
         path : path-like
-            Safe agent folder (``agent.json`` + ``policy.pt``), a ``train.py`` run
+            Safe agent folder (``agent.json`` + ``policy.safetensors``), a ``train.py`` run
             folder (its ``best_agent/`` or ``final_agent/``) or the ``agent.json`` file.
             With ``allow_pickle=True`` also a run folder or model ``.zip`` holding only
             stable-baselines3's pickled files.

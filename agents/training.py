@@ -6,7 +6,7 @@ the run:
 * ``config.yml`` (resolved hyperparameters, algorithm, env id and the resolved env
   kwargs), ``args.yml`` (parsed arguments), ``command.txt`` (every command line);
 * ``best_agent/`` and ``final_agent/``: the agent in the safe format of
-  :mod:`tether_gym_agents.agent_files` (``agent.json`` + ``policy.pt``; this is what
+  :mod:`tether_gym_agents.agent_files` (``agent.json`` + ``policy.safetensors``; this is what
   ``evaluate.py RUN`` loads);
 * ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
   ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);

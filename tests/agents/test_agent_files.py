@@ -121,9 +121,17 @@ def test_safe_files_round_trip_to_identical_actions(tmp_path, algo):
     meta = json.loads((tmp_path / algo / AGENT_FILE).read_text())  # strict JSON
     assert meta["obs_normalization"]["clip_obs"] == 5.0
     assert np.array_equal(np.array(meta["obs_normalization"]["mean"]), rms.mean)
-    # only tensors in the weights file
-    state = torch.load(tmp_path / algo / WEIGHTS_FILE, weights_only=True)
-    assert all(isinstance(v, torch.Tensor) for v in state.values())
+    # the weights file is safetensors (8-byte header length, JSON header, raw bytes):
+    # no pickle opcode, no zip archive
+    blob = (tmp_path / algo / WEIGHTS_FILE).read_bytes()
+    header = json.loads(blob[8:8 + int.from_bytes(blob[:8], "little")])
+    module = model.policy if algo == "ppo" else model.policy.actor  # SAC acts with its actor
+    assert {k for k in header if k != "__metadata__"} == set(module.state_dict())
+    assert not blob.startswith((b"\x80", b"PK"))
+    from safetensors.torch import load_file
+
+    assert all(isinstance(v, torch.Tensor) for v in load_file(tmp_path / algo /
+                                                                WEIGHTS_FILE).values())
 
 
 def test_missing_or_modified_pieces_are_named(tmp_path):
@@ -143,7 +151,7 @@ def test_missing_or_modified_pieces_are_named(tmp_path):
     with pytest.raises(AgentLoadError, match="SHA-256.*truncated or modified"):
         TrainedAgent.load(unit)
     (unit / WEIGHTS_FILE).unlink()
-    with pytest.raises(AgentLoadError, match="weights file policy.pt is missing"):
+    with pytest.raises(AgentLoadError, match="weights file policy.safetensors is missing"):
         TrainedAgent.load(unit)
     # a lone weights file is not an agent
     lone = tmp_path / "lone"
