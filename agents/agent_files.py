@@ -465,8 +465,8 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
     path : path-like
         Run folder or model ``.zip`` inside one.
     out : path-like or None
-        Agent folder to write (default: ``<run folder>/best_agent`` or ``final_agent``
-        after the model file's name).
+        Agent folder to write (default: the run folder itself for ``best_model.zip``,
+        as ``train.py`` writes it, else ``<run folder>/final_agent``).
     allow_pickle : bool
         Must be True: the conversion unpickles the files once.
     """
@@ -475,8 +475,9 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
     model, obs_rms, clip_obs, epsilon, info = load_pickled_run(path, allow_pickle=allow_pickle)
     cfg = info["config"]
     run_dir = info["run_dir"]
-    stem = info["model_path"].stem.replace("_model", "")
-    out = Path(out) if out is not None else run_dir / f"{stem}_agent"
+    if out is None:
+        out = run_dir if info["model_path"].name == "best_model.zip" else run_dir / "final_agent"
+    out = Path(out)
     train_info = {}
     if (run_dir / "train_info.json").is_file():
         train_info = _json.loads((run_dir / "train_info.json").read_text())
@@ -501,7 +502,8 @@ def main(argv=None) -> int:
     conv = sub.add_parser("convert", help="write agent.json + policy.safetensors from a run folder")
     conv.add_argument("run", type=Path, help="run folder or model .zip")
     conv.add_argument("--out", type=Path, default=None,
-                      help="agent folder (default: RUN/best_agent or RUN/final_agent)")
+                      help="agent folder (default: RUN itself for best_model.zip, else "
+                           "RUN/final_agent)")
     conv.add_argument("--allow-pickle", action="store_true",
                       help="required: the conversion unpickles the run's files once")
     args = parser.parse_args(argv)

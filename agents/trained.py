@@ -3,7 +3,8 @@
 An agent is a folder in the safe format of :mod:`tether_gym_agents.agent_files`
 (``agent.json`` + ``policy.safetensors``: tensors and plain data only, so loading never runs
 code). ``TrainedAgent.load`` accepts such a folder, a run folder written by
-``train.py`` (it loads ``best_agent/``, else ``final_agent/``) or the ``agent.json``
+``train.py`` (its best agent sits at the top, the final one in ``final_agent/``,
+which is loaded when there is no best yet) or the ``agent.json``
 file itself. stable-baselines3's pickled files (``*.zip``, ``vecnormalize.pkl``) are
 refused unless ``allow_pickle=True`` is passed (with a warning). The loaded agent
 normalises raw env observations itself, so it runs on the plain environment through
@@ -32,7 +33,7 @@ __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agent
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 """Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
 
-RUN_AGENT_DIRS = ("best_agent", "final_agent")
+RUN_AGENT_DIRS = ("final_agent",)
 """Safe agent folders inside a ``train.py`` run folder, in the order they are tried."""
 
 
@@ -98,7 +99,7 @@ class TrainedAgent:
         ----------
         path : path-like
             Safe agent folder (``agent.json`` + ``policy.safetensors``), a ``train.py`` run
-            folder (its ``best_agent/`` or ``final_agent/``) or the ``agent.json`` file.
+            folder (its best agent, else ``final_agent/``) or the ``agent.json`` file.
             With ``allow_pickle=True`` also a run folder or model ``.zip`` holding only
             stable-baselines3's pickled files.
         algo : str or None

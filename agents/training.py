@@ -5,9 +5,9 @@ the run:
 
 * ``config.yml`` (resolved hyperparameters, algorithm, env id and the resolved env
   kwargs), ``args.yml`` (parsed arguments), ``command.txt`` (every command line);
-* ``best_agent/`` and ``final_agent/``: the agent in the safe format of
-  :mod:`tether_gym_agents.agent_files` (``agent.json`` + ``policy.safetensors``; this is what
-  ``evaluate.py RUN`` loads);
+* ``agent.json`` + ``policy.safetensors``: the best agent (the evaluations' best) in the
+  safe format of :mod:`tether_gym_agents.agent_files`, which is what ``evaluate.py
+  RUN`` loads; ``final_agent/``: the agent at the last step, in the same format;
 * ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
   ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
 * ``train_info.json`` (steps, wall time including interrupted parts, seed; rewritten
@@ -488,13 +488,14 @@ def _callbacks(eval_env, out: Path, args, eval_freq: int, ckpt_freq: int, n_envs
                    training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)})
 
     class RunEvalCallback(EvalCallback):
-        """EvalCallback that also writes ``best_agent/`` and evaluates at the very end."""
+        """EvalCallback that also writes the best agent (safe format) and evaluates at the
+        very end."""
 
         def _on_step(self) -> bool:
             best = self.best_mean_reward
             result = super()._on_step()
             if self.best_mean_reward > best:
-                save_safe(self.model, self.eval_env, "best_agent")
+                save_safe(self.model, self.eval_env, ".")
             return result
 
         def _on_training_end(self) -> None:

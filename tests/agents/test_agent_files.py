@@ -185,8 +185,8 @@ def test_convert_pickled_run(tmp_path):
         legacy = TrainedAgent.load(run, allow_pickle=True)
     with pytest.warns(UserWarning):
         assert agent_files_main(["convert", str(run), "--allow-pickle"]) == 0
-    safe = TrainedAgent.load(run)  # best_agent/ is preferred over the pickles
-    assert safe.path == run / "best_agent"
+    safe = TrainedAgent.load(run)  # the safe files are preferred over the pickles
+    assert safe.path == run and (run / AGENT_FILE).is_file()
     obs = np.random.default_rng(2).normal(size=(32, 12)).astype(np.float32)
     assert np.array_equal(safe.predict(obs)[0], legacy.predict(obs)[0])
 

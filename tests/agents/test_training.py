@@ -25,7 +25,7 @@ def test_train_then_evaluate(tmp_path, algo):
     assert main(["--algo", algo, "--out", str(out), *extra, *TINY]) == 0
     for name in ("config.yml", "args.yml", "command.txt", "vecnormalize.pkl", "final_model.zip",
                  "best_model.zip", "train_info.json", "eval/evaluations.npz",
-                 "best_agent/agent.json", "best_agent/policy.safetensors", "final_agent/agent.json",
+                 "agent.json", "policy.safetensors", "final_agent/agent.json",
                  "final_agent/policy.safetensors", "learning_curve.png"):
         assert (out / name).is_file(), name
     cfg = yaml.safe_load((out / "config.yml").read_text())

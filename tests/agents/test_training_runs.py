@@ -27,13 +27,13 @@ def test_run_shorter_than_eval_freq_ends_with_evaluation(tmp_path):
     out = tmp_path / "ppo"
     # the packaged config evaluates every 50,000 steps: this run is far shorter
     assert main(["--out", str(out), "--timesteps", "300", *FAST, *SHORT]) == 0
-    for name in ("eval/evaluations.npz", "best_model.zip", "best_agent/agent.json",
+    for name in ("eval/evaluations.npz", "best_model.zip", "agent.json",
                  "learning_curve.png", "final_agent/agent.json"):
         assert (out / name).is_file(), name
     info = json.loads((out / "train_info.json").read_text())
     steps = np.load(out / "eval" / "evaluations.npz")["timesteps"]
     assert list(steps) == [info["num_timesteps"]] and info["status"] == "finished"
-    assert TrainedAgent.load(out).path == out / "best_agent"
+    assert TrainedAgent.load(out).path == out  # the best agent, in the safe format
 
 
 def test_resolve_env_kwargs_user_value_wins():
