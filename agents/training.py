@@ -367,7 +367,8 @@ def _resume_candidates(run_dir: Path) -> list[tuple[int, Path, Path, Path]]:
         tag = ckpt.stem.split("_")[-2]
         if not tag.isdigit():
             continue
-        found.append((_zip_timesteps(ckpt) if _zip_timesteps(ckpt) is not None else int(tag),
+        steps = _zip_timesteps(ckpt)
+        found.append((steps if steps is not None else int(tag),
                       0, ckpt, ckpt.parent / f"model_vecnormalize_{tag}_steps.pkl",
                       ckpt.parent / f"model_replay_buffer_{tag}_steps.pkl"))
     found = [(s if s is not None else -1, pri, m, st, b) for s, pri, m, st, b in found]
