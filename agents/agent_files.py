@@ -249,6 +249,8 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     tmp = path / (AGENT_FILE + ".tmp")
     tmp.write_text(text)
     tmp.replace(path / AGENT_FILE)
+    # safetensors writes its file owner-only; give it the permissions of agent.json
+    weights.chmod((path / AGENT_FILE).stat().st_mode & 0o777)
     return path
 
 
