@@ -1,110 +1,151 @@
-"""Load a trained stable-baselines3 agent as a policy with the common ``predict``.
+"""Load a trained agent as a policy with the common ``predict``.
 
-A run folder written by ``train.py`` holds ``best_model.zip`` (the evaluation
-callback's best) and/or ``final_model.zip``, ``vecnormalize.pkl`` (observation
-statistics, when VecNormalize was used) and ``config.yml``. The loaded agent
+An agent is a folder in the safe format of :mod:`tether_gym_agents.agent_files`
+(``agent.json`` + ``policy.safetensors``: tensors and plain data only, so loading never runs
+code). ``TrainedAgent.load`` accepts such a folder, a run folder written by
+``train.py`` (its best agent sits at the top, the final one in ``final_agent/``,
+which is loaded when there is no best yet) or the ``agent.json``
+file itself. stable-baselines3's pickled files (``*.zip``, ``vecnormalize.pkl``) are
+refused unless ``allow_pickle=True`` is passed (with a warning). The loaded agent
 normalises raw env observations itself, so it runs on the plain environment through
 the same evaluation path as the baselines.
 """
 
 from __future__ import annotations
 
-import pickle
-import zipfile
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents"]
+from .agent_files import (
+    AGENT_FILE,
+    PICKLED_MODEL_FILES,
+    WEIGHTS_FILE,
+    AgentLoadError,
+    is_unit,
+    load_agent,
+    load_pickled_run,
+)
+
+__all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
+           "RUN_AGENT_DIRS", "find_unit"]
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
-"""Shipped agents: one run folder per algorithm (``ppo``, ``sac``)."""
+"""Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
 
-MODEL_FILES = ("best_model.zip", "final_model.zip", "model.zip")
-
-
-class AgentLoadError(ValueError):
-    """A run folder or model file is missing, corrupt or not a tether_gym agent."""
+RUN_AGENT_DIRS = ("final_agent",)
+"""Safe agent folders inside a ``train.py`` run folder, in the order they are tried."""
 
 
-def _algo_class(name: str):
-    from stable_baselines3 import PPO, SAC
-
-    classes = {"ppo": PPO, "sac": SAC}
-    try:
-        return classes[name.lower()]
-    except KeyError:
-        raise AgentLoadError(f"unknown algorithm {name!r}; valid: {sorted(classes)}") from None
-
-
-def _read_algo(run_dir: Path) -> str | None:
-    cfg = run_dir / "config.yml"
-    if not cfg.is_file():
+def find_unit(path) -> Path | None:
+    """The safe agent folder that ``path`` designates, or None when there is none."""
+    path = Path(path)
+    if path.is_file():
+        if path.name in (AGENT_FILE, WEIGHTS_FILE):
+            return path.parent
         return None
-    import yaml
-
-    with open(cfg) as fh:
-        data = yaml.safe_load(fh) or {}
-    return data.get("algo")
+    if is_unit(path):
+        return path
+    for sub in RUN_AGENT_DIRS:
+        if is_unit(path / sub):
+            return path / sub
+    return None
 
 
 class TrainedAgent:
-    """A stable-baselines3 model plus its observation normalisation.
+    """A stable-baselines3 policy plus its observation normalisation.
 
     Use :meth:`load`; ``predict`` has stable-baselines3's signature and is
     deterministic by default.
+
+    Attributes
+    ----------
+    model : stable_baselines3 BasePolicy
+        The policy (``model.observation_space``, ``model.predict``).
+    algo : str
+        ``"ppo"`` or ``"sac"``, as recorded in the agent's files.
+    env_id, env_kwargs : str or None, dict
+        The environment the agent was trained on (as recorded).
+    path : Path or None
+        The folder it was loaded from.
     """
 
     def __init__(self, model, obs_rms=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
-                 name: str = "agent"):
+                 name: str = "agent", algo: str | None = None, env_id: str | None = None,
+                 env_kwargs: dict | None = None, path: Path | None = None):
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
         self.epsilon = epsilon
         self.name = name
+        self.algo = algo
+        self.env_id = env_id
+        self.env_kwargs = dict(env_kwargs or {})
+        self.path = path
+
+    @property
+    def observation_space(self):
+        return self.model.observation_space
+
+    @property
+    def action_space(self):
+        return self.model.action_space
 
     @classmethod
-    def load(cls, path, algo: str | None = None) -> TrainedAgent:
-        """Load from a run folder or a model ``.zip`` (with ``vecnormalize.pkl`` beside it).
+    def load(cls, path, algo: str | None = None, allow_pickle: bool = False) -> TrainedAgent:
+        """Load an agent folder, a run folder or ``agent.json``; pickles only on opt-in.
+
+        Parameters
+        ----------
+        path : path-like
+            Safe agent folder (``agent.json`` + ``policy.safetensors``), a ``train.py`` run
+            folder (its best agent, else ``final_agent/``) or the ``agent.json`` file.
+            With ``allow_pickle=True`` also a run folder or model ``.zip`` holding only
+            stable-baselines3's pickled files.
+        algo : str or None
+            Only for pickled run folders whose ``config.yml`` lacks the algorithm.
+        allow_pickle : bool
+            Load stable-baselines3's pickled ``.zip`` / ``vecnormalize.pkl`` (they can run
+            code when loaded; a warning is issued). Safe files are always preferred.
 
         Raises
         ------
         AgentLoadError
-            If nothing loadable is there or a file is corrupt; the message names the path.
+            If nothing loadable is there, a piece of the agent is missing (named), a file
+            is corrupt, or only pickled files are there and ``allow_pickle`` is False.
         """
         path = Path(path)
-        if path.is_dir():
-            run_dir = path
-            found = [run_dir / f for f in MODEL_FILES if (run_dir / f).is_file()]
-            if not found:
-                raise AgentLoadError(f"no model file ({', '.join(MODEL_FILES)}) in {path}")
-            model_path = found[0]
-        elif path.is_file():
-            run_dir = path.parent
-            model_path = path
-        else:
+        if not path.exists():
             raise AgentLoadError(f"agent path {str(path)!r} does not exist")
-        algo = algo or _read_algo(run_dir) or _guess_algo(model_path)
-        try:
-            model = _algo_class(algo).load(model_path, device="cpu")
-        except (zipfile.BadZipFile, KeyError, ValueError, EOFError, RuntimeError) as exc:
-            raise AgentLoadError(f"cannot load {algo.upper()} model {model_path}: {exc}") from exc
-        obs_rms = None
-        stats = run_dir / "vecnormalize.pkl"
-        if stats.is_file():
-            try:
-                with open(stats, "rb") as fh:
-                    vecnorm = pickle.load(fh)
-            except Exception as exc:  # noqa: BLE001 - any unpickling failure is a corrupt file
-                raise AgentLoadError(f"corrupt normalisation statistics {stats}: {exc}") from exc
-            if not hasattr(vecnorm, "obs_rms"):
-                raise AgentLoadError(f"{stats} does not hold VecNormalize statistics")
-            obs_rms = vecnorm.obs_rms if vecnorm.norm_obs else None
-            return cls(model, obs_rms, vecnorm.clip_obs, vecnorm.epsilon,
-                       name=f"{algo}:{run_dir.name}")
-        return cls(model, obs_rms, name=f"{algo}:{run_dir.name}")
+        unit = find_unit(path)
+        if unit is not None:
+            policy, meta = load_agent(unit)
+            norm = meta["obs_normalization"]
+            obs_rms = None
+            if norm is not None:
+                obs_rms = _Stats(norm["mean"], norm["var"])
+            label = (path.parent if path.is_file() else path).name
+            return cls(policy, obs_rms, float(norm["clip_obs"]) if norm else 10.0,
+                       float(norm["epsilon"]) if norm else 1e-8,
+                       name=f"{meta['algo']}:{label}", algo=meta["algo"],
+                       env_id=meta["env"].get("id"), env_kwargs=meta["env"].get("kwargs"),
+                       path=unit)
+        if path.is_file() and path.suffix not in (".zip", ".pkl"):
+            raise AgentLoadError(f"{path} is not an agent file: give an agent folder "
+                                 f"({AGENT_FILE} + {WEIGHTS_FILE}) or a run folder")
+        if path.is_dir() and not any((path / f).is_file() for f in PICKLED_MODEL_FILES):
+            raise AgentLoadError(f"no agent in {path}: no {AGENT_FILE} (nor "
+                                 f"{'/, '.join(RUN_AGENT_DIRS)}/ holding one)")
+        model, obs_rms, clip_obs, epsilon, info = load_pickled_run(
+            path, allow_pickle=allow_pickle, algo=algo)
+        cfg = info["config"]
+        return cls(model.policy, obs_rms, clip_obs, epsilon,
+                   name=f"{info['algo']}:{info['run_dir'].name}", algo=info["algo"],
+                   env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
+                   path=info["run_dir"])
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
+        """Observations as the policy saw them in training (VecNormalize's formula)."""
         if self.obs_rms is None:
             return obs
         return np.clip((obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon),
@@ -123,16 +164,12 @@ class TrainedAgent:
         return f"TrainedAgent({self.name})"
 
 
-def _guess_algo(model_path: Path) -> str:
-    try:
-        with zipfile.ZipFile(model_path) as zf:
-            data = zf.read("data").decode()
-    except (zipfile.BadZipFile, KeyError, OSError) as exc:
-        raise AgentLoadError(f"{model_path} is not a stable-baselines3 model file: {exc}") from exc
-    for algo in ("sac", "ppo"):
-        if f"stable_baselines3.{algo}" in data:
-            return algo
-    raise AgentLoadError(f"cannot tell the algorithm of {model_path}; pass algo='ppo' or 'sac'")
+class _Stats:
+    """Mean and variance of observations (the part of RunningMeanStd that acting needs)."""
+
+    def __init__(self, mean: np.ndarray, var: np.ndarray):
+        self.mean = np.asarray(mean, dtype=np.float64)
+        self.var = np.asarray(var, dtype=np.float64)
 
 
 def pretrained_agents() -> dict[str, Path]:
@@ -140,4 +177,4 @@ def pretrained_agents() -> dict[str, Path]:
     if not PRETRAINED_DIR.is_dir():
         return {}
     return {p.name: p for p in sorted(PRETRAINED_DIR.iterdir())
-            if p.is_dir() and any((p / f).is_file() for f in MODEL_FILES)}
+            if p.is_dir() and find_unit(p) is not None}

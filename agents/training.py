@@ -1,12 +1,20 @@
 """Train PPO or SAC on a tether_gym environment: the code behind ``train.py``.
 
-A run folder (``--out``) keeps everything needed to reproduce and resume the run:
-``config.yml`` (resolved hyperparameters, algorithm, env id and kwargs),
-``args.yml`` (parsed arguments), ``command.txt`` (the command line),
-``vecnormalize.pkl`` (normalisation statistics), ``best_model.zip`` (the evaluation
-callback's best), ``final_model.zip``, ``checkpoints/``, ``eval/evaluations.npz``
-(the learning curve), ``tb/`` (tensorboard) and ``train_info.json`` (steps, wall
-time, seed).
+A run folder (``--out``) keeps everything needed to reproduce, evaluate and resume
+the run:
+
+* ``config.yml`` (resolved hyperparameters, algorithm, env id and the resolved env
+  kwargs), ``args.yml`` (parsed arguments), ``command.txt`` (every command line);
+* ``agent.json`` + ``policy.safetensors``: the best agent (the evaluations' best) in the
+  safe format of :mod:`tether_gym_agents.agent_files`, which is what ``evaluate.py
+  RUN`` loads; ``final_agent/``: the agent at the last step, in the same format;
+* ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
+  ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
+* ``train_info.json`` (steps, wall time including interrupted parts, seed; rewritten
+  every ``PROGRESS_EVERY_S`` seconds while training);
+* for ``--resume`` only, stable-baselines3's own pickled files, which this package
+  writes and reads back itself: ``final_model.zip``, ``best_model.zip``,
+  ``vecnormalize.pkl``, ``final_replay_buffer.pkl`` (SAC) and ``checkpoints/``.
 """
 
 from __future__ import annotations
@@ -16,26 +24,41 @@ import ast
 import difflib
 import inspect
 import json
+import math
+import re
 import shlex
 import sys
 import time
+import zipfile
 from pathlib import Path
 
 import gymnasium as gym
 
 import tether_gym
 
-__all__ = ["main", "load_hyperparams", "parse_env_kwargs", "plot_learning_curve", "ConfigError",
-           "CONFIG_DIR"]
+from .agent_files import _jsonable, save_agent
+
+__all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
+           "plot_learning_curve", "ConfigError", "CONFIG_DIR"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
             "checkpoint_freq")
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
+SEED_MAX = 2**31 - 1
+PROGRESS_EVERY_S = 30.0
+"""Seconds between rewrites of ``train_info.json`` while training (wall time survives
+a kill up to this much)."""
+
+# A fixed value the user types clears the config's random range of the same quantity.
+RANGE_OF = {"eccentricity": ("eccentricity_range",), "masses": ("mass_range",),
+            "initial_theta": ("init_theta_range",), "initial_lengths": ("init_length_range",)}
+# Per-tether lists: a config's list with equal entries applies to any number of bodies.
+PER_TETHER = ("masses", "initial_lengths", "initial_theta")
 
 
 class ConfigError(ValueError):
-    """A hyperparameter file or value is invalid."""
+    """A hyperparameter file, command-line value or env kwarg is invalid."""
 
 
 def _algo_class(algo: str):
@@ -46,6 +69,10 @@ def _algo_class(algo: str):
 
 def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
     """Hyperparameters for ``env_id`` from a YAML file keyed by env id with a ``default`` block.
+
+    The env id's block overrides ``default``. (rl-baselines3-zoo reads only the env
+    id's block, so the shipped files keep that block complete and put only
+    ``train.py``'s own keys, ``eval_freq`` and ``checkpoint_freq``, in ``default``.)
 
     Raises
     ------
@@ -63,7 +90,8 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
             doc = yaml.safe_load(fh) or {}
         except yaml.YAMLError as exc:
             raise ConfigError(f"{path} is not valid YAML: {exc}") from exc
-    if not isinstance(doc, dict):
+    if not isinstance(doc, dict) or not all(isinstance(v, (dict, type(None)))
+                                            for v in doc.values()):
         raise ConfigError(f"{path} must map env ids (and 'default') to hyperparameters")
     params = dict(doc.get("default") or {})
     params.update(doc.get(env_id) or {})
@@ -82,25 +110,107 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
             raise ConfigError(f"unknown normalize key(s) {bad}; valid: {list(NORMALIZE_KEYS)}")
     elif not isinstance(norm, bool):
         raise ConfigError(f"normalize must be true, false or a dict, got {norm!r}")
+    for key in ("n_envs", "n_timesteps", "eval_freq", "checkpoint_freq"):
+        if key in params:
+            value = params[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 1 \
+                    or value != int(value):
+                raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
+    if not isinstance(params.get("env_kwargs") or {}, dict):
+        raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
     return params
 
 
+_BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
+
+
 def parse_env_kwargs(items: list[str]) -> dict:
-    """Parse ``key=value`` strings; values are Python literals (no code is evaluated)."""
+    """Parse ``key=value`` strings; values are Python literals (no code is evaluated).
+
+    A value that is not a literal is taken as a string only when it is a bare word
+    (``gravity=full``); anything else (``masses=(1,2``, ``x=f()``) is an error.
+    """
     out = {}
     for item in items or []:
         if "=" not in item:
-            raise ConfigError(f"--env-kwargs entry {item!r} must look like key=value")
+            raise ConfigError(f"--env-kwargs {item!r}: each entry must look like key=value")
         key, text = item.split("=", 1)
         key = key.strip()
         if not key.isidentifier():
-            raise ConfigError(f"--env-kwargs key {key!r} is not a valid name")
+            raise ConfigError(f"--env-kwargs {item!r}: key {key!r} is not a valid name")
+        text = text.strip()
         try:
             value = ast.literal_eval(text)
-        except (ValueError, SyntaxError):
-            value = {"None": None, "none": None, "true": True, "false": False}.get(text, text)
+        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+            words = {"None": None, "none": None, "null": None, "true": True, "false": False}
+            if text in words:
+                value = words[text]
+            elif _BARE_WORD.fullmatch(text):
+                value = text
+            else:
+                raise ConfigError(
+                    f"--env-kwargs {item!r}: {text!r} is not a Python literal; allowed: "
+                    "numbers, True/False/None, tuples/lists like (1, 2), quoted strings or "
+                    "bare words like full") from None
         out[key] = value
     return out
+
+
+def resolve_env_kwargs(config_kwargs: dict, user_kwargs: dict, source: str,
+                       default_n_bodies: int = 3) -> tuple[dict, list[str]]:
+    """Env kwargs of a run: the user's values win over the config's.
+
+    * A fixed value typed by the user clears the config's random range of the same
+      quantity (``eccentricity`` clears ``eccentricity_range``, ``masses`` clears
+      ``mass_range``, ``initial_theta`` clears ``init_theta_range``,
+      ``initial_lengths`` clears ``init_length_range``), unless the user typed the
+      range too.
+    * A per-tether list of the config (``masses``, ``initial_lengths``,
+      ``initial_theta``) whose entries are all equal applies to any ``n_bodies``; an
+      unequal one of the wrong length is an error naming the config line.
+
+    Returns
+    -------
+    kwargs : dict
+        The resolved env kwargs (plain lists, no tuples).
+    notes : list of str
+        What was changed, to print.
+    """
+    config_kwargs = dict(config_kwargs or {})
+    notes = []
+    for key in user_kwargs:
+        for range_key in RANGE_OF.get(key, ()):
+            if range_key in config_kwargs and range_key not in user_kwargs:
+                notes.append(f"--env-kwargs {key}={user_kwargs[key]!r} clears {source}'s "
+                             f"{range_key}: {config_kwargs[range_key]!r}")
+                del config_kwargs[range_key]
+    kwargs = _jsonable({**config_kwargs, **user_kwargs})
+    n_bodies = kwargs.get("n_bodies", default_n_bodies)
+    if isinstance(n_bodies, int) and not isinstance(n_bodies, bool) and n_bodies >= 2:
+        n = n_bodies - 1
+        for key in PER_TETHER:
+            value = kwargs.get(key)
+            if key in user_kwargs or not isinstance(value, list) or len(value) == n:
+                continue
+            if value and all(v == value[0] for v in value):
+                kwargs[key] = [value[0]] * n
+                notes.append(f"{source}'s {key}: {value!r} applied to n_bodies={n_bodies} as "
+                             f"{kwargs[key]!r}")
+            else:
+                raise ConfigError(f"{source}: env_kwargs {key}: {value!r} has {len(value)} "
+                                  f"entries, but n_bodies={n_bodies} needs {n}; give {key} in "
+                                  "--env-kwargs or edit that line")
+    return kwargs, notes
+
+
+def _check_env(env_id: str, kwargs: dict, items: list[str], source: str) -> None:
+    """Build the env once with the resolved kwargs: bad values fail here, before training."""
+    try:
+        env = gym.make(env_id, **kwargs)
+    except (ValueError, TypeError) as exc:
+        typed = f"--env-kwargs {' '.join(items)}" if items else "no --env-kwargs"
+        raise ConfigError(f"invalid env kwargs ({typed}; {source}): {exc}") from None
+    env.close()
 
 
 def plot_learning_curve(run_dir: Path) -> Path | None:
@@ -142,27 +252,40 @@ def _check_env_id(env_id: str) -> None:
         raise ConfigError(f"unknown env id {env_id!r}{hint}; tether_gym ids: {ids}")
 
 
+def _check_env_id(env_id: str) -> None:
+    ids = [i for i in gym.registry if i.startswith("tether_gym/")]
+    if env_id not in gym.registry:
+        close = difflib.get_close_matches(env_id, ids or list(gym.registry), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"unknown env id {env_id!r}{hint}; tether_gym ids: {ids}")
+
+
 def _build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="train.py", description="Train PPO or SAC on tether_gym.")
     p.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
     p.add_argument("--env-id", default=tether_gym.ENV_ID)
     p.add_argument("--env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
                    help="env arguments as Python literals, e.g. eccentricity=0.3 "
-                        "masses=(1,2); they override the config's env_kwargs")
-    p.add_argument("--n-envs", type=int, default=None, help="parallel envs (default: config)")
+                        "masses=(1,2); they win over the config's env_kwargs (a fixed value "
+                        "clears the config's random range of the same quantity)")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="parallel envs, >= 1 (default: config)")
     p.add_argument("--timesteps", type=int, default=None,
-                   help="env steps to train in this call (default: config n_timesteps)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--config", type=Path, default=None,
+                   help="env steps to train in this call, >= 1 (default: config n_timesteps)")
+    p.add_argument("--seed", type=int, default=0, help=f"seed in [0, {SEED_MAX}] (default 0)")
+    p.add_argument("--config", type=str, default=None,
                    help="hyperparameter YAML (default: the packaged configs/<algo>.yml)")
-    p.add_argument("--out", type=Path, default=None, help="run folder (default runs/<algo>)")
+    p.add_argument("--out", type=str, default=None, help="run folder (default runs/<algo>)")
     p.add_argument("--resume", action="store_true",
-                   help="continue the run in --out from its latest checkpoint or final model; "
-                        "the step counter continues")
-    p.add_argument("--eval-freq", type=int, default=None, help="env steps between evaluations")
-    p.add_argument("--eval-episodes", type=int, default=5)
+                   help="continue the run in --out from its latest good checkpoint or final "
+                        "model; the step counter continues")
+    p.add_argument("--eval-freq", type=int, default=None,
+                   help="env steps between evaluations, >= 1 (default: config); a run always "
+                        "ends with one")
+    p.add_argument("--eval-episodes", type=int, default=5,
+                   help="episodes per evaluation, >= 1 (default 5)")
     p.add_argument("--checkpoint-freq", type=int, default=None,
-                   help="env steps between checkpoints")
+                   help="env steps between checkpoints, >= 1 (default: config)")
     p.add_argument("--torch-threads", type=int, default=1,
                    help="torch threads (default 1: two threads were measured up to 30x slower "
                         "on 2-core machines under load)")
@@ -171,49 +294,257 @@ def _build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def _latest_checkpoint(run_dir: Path) -> tuple[Path, Path | None]:
-    """Most advanced saved model in a run folder and its VecNormalize statistics."""
-    ckpts = sorted((run_dir / "checkpoints").glob("model_*_steps.zip"),
-                   key=lambda p: int(p.stem.split("_")[-2]))
-    candidates = []
-    if ckpts:
-        steps = int(ckpts[-1].stem.split("_")[-2])
-        stats = run_dir / "checkpoints" / f"model_vecnormalize_{steps}_steps.pkl"
-        candidates.append((steps, ckpts[-1], stats if stats.is_file() else None))
+def _at_least(flag: str, value, low: int = 1) -> None:
+    if value is not None and value < low:
+        raise ConfigError(f"{flag} {value}: must be an integer >= {low}")
+
+
+def _check_args(args) -> None:
+    """Command-line values alone (before the config is read)."""
+    _at_least("--n-envs", args.n_envs)
+    _at_least("--timesteps", args.timesteps)
+    _at_least("--eval-freq", args.eval_freq)
+    _at_least("--checkpoint-freq", args.checkpoint_freq)
+    _at_least("--eval-episodes", args.eval_episodes)
+    _at_least("--torch-threads", args.torch_threads)
+    if not 0 <= args.seed <= SEED_MAX:
+        raise ConfigError(f"--seed {args.seed}: must be an integer in [0, {SEED_MAX}]")
+    if args.config is not None:
+        if not args.config.strip():
+            raise ConfigError(f"--config {args.config!r}: must be the path of a YAML file")
+        if Path(args.config).is_dir():
+            raise ConfigError(f"--config {args.config!r}: is a folder; give a YAML file")
+    if args.out is not None and not args.out.strip():
+        raise ConfigError(f"--out {args.out!r}: must be the path of a folder")
+
+
+def _check_out(out: Path) -> None:
+    """The run folder exists or can be made, and a file can be written in it."""
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {str(out)!r}: is a file; give a folder (new or a run folder)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write_test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise ConfigError(f"--out {str(out)!r}: cannot write there ({exc.strerror or exc})") \
+            from None
+
+
+def _yaml_dump(data) -> str:
+    """YAML without anchors/aliases (``&id001``), tuples as lists."""
+    import yaml
+
+    class _NoAliases(yaml.SafeDumper):
+        def ignore_aliases(self, data):
+            return True
+
+    return yaml.dump(_jsonable(data), Dumper=_NoAliases, sort_keys=False)
+
+
+# ---------------------------------------------------------------------- resume
+def _zip_timesteps(path: Path) -> int | None:
+    """``num_timesteps`` from a model zip's plain-JSON ``data`` (nothing is unpickled)."""
+    try:
+        with zipfile.ZipFile(path) as zf:
+            return int(json.loads(zf.read("data"))["num_timesteps"])
+    except (zipfile.BadZipFile, KeyError, ValueError, TypeError, OSError, EOFError):
+        return None
+
+
+def _resume_candidates(run_dir: Path) -> list[tuple[int, Path, Path, Path]]:
+    """(steps, model, normalisation stats, replay buffer) of every saved model, newest first.
+
+    The final model comes before a checkpoint of the same step.
+    """
+    found = []
     final = run_dir / "final_model.zip"
     if final.is_file():
-        info = run_dir / "train_info.json"
-        steps = json.loads(info.read_text())["num_timesteps"] if info.is_file() else -1
-        stats = run_dir / "vecnormalize.pkl"
-        candidates.append((steps, final, stats if stats.is_file() else None))
+        found.append((_zip_timesteps(final), 1, final, run_dir / "vecnormalize.pkl",
+                      run_dir / "final_replay_buffer.pkl"))
+    for ckpt in (run_dir / "checkpoints").glob("model_*_steps.zip"):
+        tag = ckpt.stem.split("_")[-2]
+        if not tag.isdigit():
+            continue
+        steps = _zip_timesteps(ckpt)
+        found.append((steps if steps is not None else int(tag),
+                      0, ckpt, ckpt.parent / f"model_vecnormalize_{tag}_steps.pkl",
+                      ckpt.parent / f"model_replay_buffer_{tag}_steps.pkl"))
+    found = [(s if s is not None else -1, pri, m, st, b) for s, pri, m, st, b in found]
+    found.sort(key=lambda c: (c[0], c[1]), reverse=True)
+    return [(s, m, st, b) for s, _, m, st, b in found]
+
+
+def _load_resume_point(run_dir, algo_cls, venv, eval_env, normalize: bool, tb_log: str):
+    """Load the newest good saved model; a truncated or incomplete one is skipped.
+
+    Returns (model, venv, eval_env, model_path, buffer_loaded).
+    """
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    candidates = _resume_candidates(run_dir)
     if not candidates:
         raise ConfigError(f"--resume: no checkpoint or final_model.zip in {run_dir}")
-    _, model, stats = max(candidates, key=lambda c: c[0])
-    return model, stats
+    for steps, model_path, stats, buffer in candidates:
+        try:
+            if normalize:
+                if not stats.is_file():
+                    raise FileNotFoundError(f"its normalisation statistics {stats.name} are "
+                                            "missing")
+                train_env = VecNormalize.load(str(stats), venv)
+                test_env = VecNormalize.load(str(stats), eval_env)
+                test_env.training = False
+                test_env.norm_reward = False
+            else:
+                train_env, test_env = venv, eval_env
+            model = algo_cls.load(model_path, env=train_env, device="cpu", tensorboard_log=tb_log)
+            loaded = False
+            if hasattr(model, "replay_buffer"):
+                if buffer.is_file():
+                    model.load_replay_buffer(buffer)
+                    loaded = True
+                else:
+                    print(f"warning: {model_path.name} has no replay buffer beside it "
+                          f"({buffer.name}); SAC continues with an empty buffer")
+        except Exception as exc:  # noqa: BLE001 - truncated files fail in many ways
+            print(f"warning: skipping {model_path} (step {steps}): {type(exc).__name__}: "
+                  f"{exc}", file=sys.stderr)
+            continue
+        return model, train_env, test_env, model_path, loaded
+    raise ConfigError(f"--resume: no loadable model in {run_dir} (all "
+                      f"{len(candidates)} saved models are truncated or incomplete)")
 
 
-def _continue_eval_history(callback, path: Path) -> None:
-    """Seed an EvalCallback with the evaluations a previous run saved (it would overwrite)."""
+def _continue_eval_history(callback, path: Path, last_step: int) -> int:
+    """Seed an EvalCallback with the evaluations up to ``last_step``; drop later ones.
+
+    Evaluations after the resume point were made by the interrupted part of the run,
+    which the resumed run repeats; the file is rewritten without them. Returns the
+    number dropped.
+    """
     import numpy as np
 
     with np.load(path) as data:
-        callback.evaluations_timesteps = list(data["timesteps"])
-        callback.evaluations_results = [list(r) for r in data["results"]]
-        callback.evaluations_length = [list(r) for r in data["ep_lengths"]]
-        if "successes" in data:
-            callback.evaluations_successes = [list(r) for r in data["successes"]]
-    returns = [float(np.mean(r)) for r in callback.evaluations_results]
+        arrays = {k: data[k] for k in data.files}
+    keep = arrays["timesteps"] <= last_step
+    dropped = int((~keep).sum())
+    if dropped:
+        np.savez(path, **{k: v[keep] for k, v in arrays.items()})
+    callback.evaluations_timesteps = [int(t) for t in arrays["timesteps"][keep]]
+    callback.evaluations_results = [list(r) for r in arrays["results"][keep]]
+    callback.evaluations_length = [list(r) for r in arrays["ep_lengths"][keep]]
+    if "successes" in arrays:
+        callback.evaluations_successes = [list(r) for r in arrays["successes"][keep]]
+    # best_model.zip may come from a dropped evaluation: keep its score as the bar
+    returns = [float(np.mean(r)) for r in arrays["results"]]
     if returns:
         callback.best_mean_reward = max(returns)
+    return dropped
 
 
-def _replay_buffer_beside(model_path: Path) -> Path | None:
-    """The replay buffer CheckpointCallback saved with a checkpoint (off-policy only)."""
-    if model_path.parent.name != "checkpoints":
-        return None
-    steps = model_path.stem.split("_")[-2]
-    path = model_path.parent / f"model_replay_buffer_{steps}_steps.pkl"
-    return path if path.is_file() else None
+def _truncate_tensorboard(tb_dir: Path, last_step: int) -> int:
+    """Remove TensorBoard events after ``last_step`` (the part a resumed run repeats).
+
+    Returns the number of events removed.
+    """
+    if not tb_dir.is_dir():
+        return 0
+    from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+    from tensorboard.summary.writer.record_writer import RecordWriter
+
+    removed = 0
+    for path in sorted(tb_dir.rglob("events.out.tfevents.*")):
+        try:
+            events = list(EventFileLoader(str(path)).Load())
+        except Exception:  # noqa: BLE001 - a truncated last record: keep what was read
+            events = []
+        keep = [e for e in events if e.step <= last_step]
+        if len(keep) == len(events):
+            continue
+        removed += len(events) - len(keep)
+        tmp = path.with_name(path.name + ".tmp")
+        with open(tmp, "wb") as fh:
+            writer = RecordWriter(fh)
+            for event in keep:
+                writer.write(event.SerializeToString())
+            writer.flush()
+        tmp.replace(path)
+    return removed
+
+
+# ---------------------------------------------------------------------- callbacks
+def _callbacks(eval_env, out: Path, args, eval_freq: int, ckpt_freq: int, n_envs: int,
+               agent_meta: dict, info_base: dict, previous_wall: float, off_policy: bool):
+    from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    def save_safe(model, env, folder: str) -> None:
+        norm = env if isinstance(env, VecNormalize) and env.norm_obs else None
+        save_agent(out / folder, model.policy, agent_meta["algo"],
+                   obs_rms=norm.obs_rms if norm is not None else None,
+                   clip_obs=norm.clip_obs if norm is not None else 10.0,
+                   epsilon=norm.epsilon if norm is not None else 1e-8,
+                   env_id=agent_meta["env_id"], env_kwargs=agent_meta["env_kwargs"],
+                   training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)})
+
+    class RunEvalCallback(EvalCallback):
+        """EvalCallback that also writes the best agent (safe format) and evaluates at the
+        very end."""
+
+        def _on_step(self) -> bool:
+            best = self.best_mean_reward
+            result = super()._on_step()
+            if self.best_mean_reward > best:
+                save_safe(self.model, self.eval_env, ".")
+            return result
+
+        def _on_training_end(self) -> None:
+            done = self.evaluations_timesteps[-1] if self.evaluations_timesteps else -1
+            if done < self.num_timesteps:  # a run always ends with an evaluation
+                n_calls, self.n_calls = self.n_calls, self.eval_freq
+                try:
+                    self._on_step()
+                finally:
+                    self.n_calls = n_calls
+
+    class ProgressCallback(BaseCallback):
+        """Rewrites ``train_info.json`` every ``PROGRESS_EVERY_S`` s (wall time survives a kill)."""
+
+        def _on_training_start(self) -> None:
+            self.t0 = time.perf_counter()
+            self.last = -math.inf
+            self.write("running")
+
+        def _on_step(self) -> bool:
+            if time.perf_counter() - self.last >= PROGRESS_EVERY_S:
+                self.write("running")
+            return True
+
+        def write(self, status: str) -> float:
+            now = time.perf_counter()
+            self.last = now
+            wall = previous_wall + (now - self.t0)
+            _write_info(out, {**info_base, "status": status,
+                              "num_timesteps": int(self.model.num_timesteps),
+                              "wall_time_s": round(wall, 1)})
+            return wall
+
+    evaluator = RunEvalCallback(eval_env, n_eval_episodes=args.eval_episodes,
+                                eval_freq=max(eval_freq // n_envs, 1),
+                                log_path=str(out / "eval"), best_model_save_path=str(out),
+                                deterministic=True, verbose=args.verbose)
+    checkpoints = CheckpointCallback(save_freq=max(ckpt_freq // n_envs, 1),
+                                     save_path=str(out / "checkpoints"), name_prefix="model",
+                                     save_vecnormalize=True, save_replay_buffer=off_policy)
+    progress = ProgressCallback()
+    return evaluator, checkpoints, progress, save_safe
+
+
+def _write_info(out: Path, info: dict) -> None:
+    tmp = out / "train_info.json.tmp"
+    tmp.write_text(json.dumps(info, indent=2))
+    tmp.replace(out / "train_info.json")
 
 
 def _make_venv(env_id, n_envs, seed, env_kwargs):
@@ -230,7 +561,8 @@ def _make_venv(env_id, n_envs, seed, env_kwargs):
     return VecMonitor(venv)
 
 
-def main(argv=None) -> int:  # noqa: C901 - a linear script
+# ---------------------------------------------------------------------- main
+def main(argv=None) -> int:
     """Command line of ``train.py``; returns the exit code."""
     parser = _build_parser()
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
@@ -241,64 +573,80 @@ def main(argv=None) -> int:  # noqa: C901 - a linear script
         return 2
 
 
-def _train(args, argv) -> int:
-    import torch
+def _resolve(args) -> dict:
+    """Every setting of one run, validated before any work starts (raises ConfigError)."""
     import yaml
-    from stable_baselines3.common.callbacks import CheckpointCallback, EvalCallback
-    from stable_baselines3.common.vec_env import VecNormalize
 
+    _check_args(args)
     _check_env_id(args.env_id)
-    if args.torch_threads < 1:
-        raise ConfigError(f"--torch-threads must be >= 1, got {args.torch_threads}")
-    torch.set_num_threads(args.torch_threads)
-    out = args.out or Path("runs") / args.algo
-    config_path = args.config or CONFIG_DIR / f"{args.algo}.yml"
+    user_kwargs = parse_env_kwargs(args.env_kwargs)
+    out = Path(args.out) if args.out is not None else Path("runs") / args.algo
     if args.resume:
         resolved = out / "config.yml"
         if not resolved.is_file():
             raise ConfigError(f"--resume: {resolved} not found (is {out} a run folder?)")
-        params = yaml.safe_load(resolved.read_text())["hyperparams"]
+        saved = yaml.safe_load(resolved.read_text()) or {}
+        if saved.get("algo") not in (None, args.algo):
+            raise ConfigError(f"--resume: {out} is a {saved['algo'].upper()} run; pass "
+                              f"--algo {saved['algo']}")
+        params = dict(saved["hyperparams"])
+        source = str(resolved)
     else:
+        config_path = Path(args.config) if args.config is not None else (
+            CONFIG_DIR / f"{args.algo}.yml")
         params = load_hyperparams(config_path, args.algo, args.env_id)
-    params = dict(params)
+        source = str(config_path)
     run = {k: params.pop(k) for k in RUN_KEYS if k in params}
-    env_kwargs = {**(run.get("env_kwargs") or {}), **parse_env_kwargs(args.env_kwargs)}
-    n_envs = args.n_envs or int(run.get("n_envs", 1))
-    if n_envs < 1:
-        raise ConfigError(f"--n-envs must be >= 1, got {n_envs}")
-    timesteps = args.timesteps if args.timesteps is not None else int(run.get("n_timesteps", 1e5))
-    if timesteps < 1:
-        raise ConfigError(f"--timesteps must be >= 1, got {timesteps}")
-    eval_freq = args.eval_freq or int(run.get("eval_freq", 10000))
-    ckpt_freq = args.checkpoint_freq or int(run.get("checkpoint_freq", 100000))
+    if "policy_kwargs" in params and not isinstance(params["policy_kwargs"], dict):
+        raise ConfigError(f"{source}: policy_kwargs must be a mapping, not "
+                          f"{params['policy_kwargs']!r} (no code is evaluated)")
+    env_kwargs, notes = resolve_env_kwargs(run.get("env_kwargs") or {}, user_kwargs, source)
+    _check_env(args.env_id, env_kwargs, args.env_kwargs, source)
+    n_envs = args.n_envs if args.n_envs is not None else int(run.get("n_envs", 1))
+    timesteps = args.timesteps if args.timesteps is not None else int(run.get("n_timesteps",
+                                                                              100_000))
+    eval_freq = args.eval_freq if args.eval_freq is not None else int(run.get("eval_freq",
+                                                                              10_000))
+    ckpt_freq = (args.checkpoint_freq if args.checkpoint_freq is not None
+                 else int(run.get("checkpoint_freq", 100_000)))
+    _check_out(out)
+    return {"out": out, "params": params, "run": run, "env_kwargs": env_kwargs, "notes": notes,
+            "n_envs": n_envs, "timesteps": timesteps, "eval_freq": eval_freq,
+            "ckpt_freq": ckpt_freq, "source": source}
+
+
+def _train(args, argv) -> int:
+    """Train one run folder (``args.out``) with the settings of ``args``."""
+    cfg = _resolve(args)
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    torch.set_num_threads(args.torch_threads)
+    out, params, run = cfg["out"], cfg["params"], cfg["run"]
+    env_kwargs, n_envs = cfg["env_kwargs"], cfg["n_envs"]
+    print(f"env {args.env_id} with env kwargs {json.dumps(env_kwargs)}")
+    for note in cfg["notes"]:
+        print(f"  note: {note}")
     norm = run.get("normalize", False)
     norm_kwargs = norm if isinstance(norm, dict) else {}
     gamma = params.get("gamma", 0.99)
-    if "policy_kwargs" in params and isinstance(params["policy_kwargs"], str):
-        raise ConfigError("policy_kwargs must be a mapping, not a string (no code is evaluated)")
-    out.mkdir(parents=True, exist_ok=True)
+    tb_log = str(out / "tb")
 
     venv = _make_venv(args.env_id, n_envs, args.seed, env_kwargs)
     eval_env = _make_venv(args.env_id, 1, args.seed + 10_000, env_kwargs)
     algo_cls = _algo_class(args.algo)
+    info_path = out / "train_info.json"
+    previous = json.loads(info_path.read_text()) if (args.resume and info_path.is_file()) else {}
     if args.resume:
-        model_path, stats = _latest_checkpoint(out)
-        if norm is not False:
-            if stats is None:
-                raise ConfigError(f"--resume: normalisation statistics missing beside {model_path}")
-            venv = VecNormalize.load(str(stats), venv)
-            eval_env = VecNormalize.load(str(stats), eval_env)
-            eval_env.training = False
-            eval_env.norm_reward = False
-        model = algo_cls.load(model_path, env=venv, device="cpu",
-                              tensorboard_log=str(out / "tb"))
-        buffer = _replay_buffer_beside(model_path)
-        if buffer is not None and hasattr(model, "load_replay_buffer"):
-            model.load_replay_buffer(buffer)
-        print(f"resuming from {model_path} at step {model.num_timesteps}"
+        model, venv, eval_env, model_path, buffer_loaded = _load_resume_point(
+            out, algo_cls, venv, eval_env, norm is not False, tb_log)
+        start = int(model.num_timesteps)
+        removed = _truncate_tensorboard(out / "tb", start)
+        print(f"resuming from {model_path} at step {start}"
               + (f" with its replay buffer "
                  f"({model.replay_buffer.size() * model.replay_buffer.n_envs} transitions)"
-                 if buffer is not None and hasattr(model, "replay_buffer") else ""))
+                 if buffer_loaded else "")
+              + (f"; {removed} TensorBoard events after step {start} removed" if removed else ""))
     else:
         if norm is not False:
             venv = VecNormalize(venv, gamma=gamma, **norm_kwargs)
@@ -306,49 +654,49 @@ def _train(args, argv) -> int:
                                     norm_obs=norm_kwargs.get("norm_obs", True), norm_reward=False,
                                     clip_obs=norm_kwargs.get("clip_obs", 10.0))
         model = algo_cls(run.get("policy", "MlpPolicy"), venv, seed=args.seed, device="cpu",
-                         tensorboard_log=str(out / "tb"), verbose=args.verbose, **params)
+                         tensorboard_log=tb_log, verbose=args.verbose, **params)
     resolved_config = {"algo": args.algo, "env_id": args.env_id, "env_kwargs": env_kwargs,
                        "n_envs": n_envs, "seed": args.seed,
                        "hyperparams": {**params, **run, "env_kwargs": env_kwargs,
-                                       "n_envs": n_envs}}
-    (out / "config.yml").write_text(yaml.safe_dump(resolved_config, sort_keys=False))
-    (out / "args.yml").write_text(yaml.safe_dump(
-        {k: (str(v) if isinstance(v, Path) else v) for k, v in vars(args).items()},
-        sort_keys=False))
+                                       "n_envs": n_envs, "eval_freq": cfg["eval_freq"],
+                                       "checkpoint_freq": cfg["ckpt_freq"]}}
+    (out / "config.yml").write_text(_yaml_dump(resolved_config))
+    (out / "args.yml").write_text(_yaml_dump(vars(args)))
     command = "python train.py " + " ".join(shlex.quote(a) for a in
                                              (sys.argv[1:] if argv is None else argv))
     with open(out / "command.txt", "a") as fh:
         fh.write(command + "\n")
-    callbacks = [
-        EvalCallback(eval_env, n_eval_episodes=args.eval_episodes,
-                     eval_freq=max(eval_freq // n_envs, 1), log_path=str(out / "eval"),
-                     best_model_save_path=str(out), deterministic=True, verbose=args.verbose),
-        CheckpointCallback(save_freq=max(ckpt_freq // n_envs, 1),
-                           save_path=str(out / "checkpoints"), name_prefix="model",
-                           save_vecnormalize=True,
-                           save_replay_buffer=hasattr(model, "replay_buffer")),
-    ]
+    info_base = {"algo": args.algo, "env_id": args.env_id, "seed": args.seed,
+                 "torch_threads": args.torch_threads, "command": command,
+                 "tether_gym": tether_gym.__version__}
+    agent_meta = {"algo": args.algo, "env_id": args.env_id, "env_kwargs": env_kwargs,
+                  "training": {"seed": args.seed, "command": command}}
+    evaluator, checkpoints, progress, save_safe = _callbacks(
+        eval_env, out, args, cfg["eval_freq"], cfg["ckpt_freq"], n_envs, agent_meta, info_base,
+        float(previous.get("wall_time_s", 0.0)), hasattr(model, "replay_buffer"))
     history = out / "eval" / "evaluations.npz"
     if args.resume and history.is_file():  # the learning curve continues, not restarts
-        _continue_eval_history(callbacks[0], history)
+        dropped = _continue_eval_history(evaluator, history, int(model.num_timesteps))
+        if dropped:
+            print(f"  dropped {dropped} evaluation(s) after step {model.num_timesteps} from "
+                  f"{history} (the resumed run repeats those steps)")
     t0 = time.perf_counter()
-    model.learn(timesteps, callback=callbacks, progress_bar=not args.no_progress,
-                reset_num_timesteps=not args.resume, tb_log_name=args.algo)
+    model.learn(cfg["timesteps"], callback=[evaluator, checkpoints, progress],
+                progress_bar=not args.no_progress, reset_num_timesteps=not args.resume,
+                tb_log_name=args.algo)
     wall = time.perf_counter() - t0
     model.save(out / "final_model.zip")
-    if isinstance(model.get_env(), VecNormalize):
-        model.get_env().save(str(out / "vecnormalize.pkl"))
-    info_path = out / "train_info.json"
-    previous = json.loads(info_path.read_text()) if (args.resume and info_path.is_file()) else {}
-    info = {"algo": args.algo, "env_id": args.env_id, "seed": args.seed,
-            "num_timesteps": int(model.num_timesteps),
-            "wall_time_s": round(previous.get("wall_time_s", 0.0) + wall, 1),
-            "torch_threads": args.torch_threads, "command": command,
-            "tether_gym": tether_gym.__version__}
-    info_path.write_text(json.dumps(info, indent=2))
+    env = model.get_env()
+    if isinstance(env, VecNormalize):
+        env.save(str(out / "vecnormalize.pkl"))
+    if hasattr(model, "replay_buffer"):
+        model.save_replay_buffer(out / "final_replay_buffer.pkl")
+    save_safe(model, env, "final_agent")
+    total_wall = progress.write("finished")
     plot_learning_curve(out)
     venv.close()
     eval_env.close()
-    print(f"trained {args.algo.upper()} to step {model.num_timesteps} in {wall:.0f} s; run "
-          f"folder {out}")
+    print(f"trained {args.algo.upper()} to step {model.num_timesteps} in {wall:.0f} s "
+          f"({total_wall:.0f} s in all calls); run folder {out}; evaluate with "
+          f"`python evaluate.py {out}`")
     return 0

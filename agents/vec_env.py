@@ -136,6 +136,33 @@ class TetherSB3VecEnv(VecEnv):
         self._episode_length[:] = 0
         return obs
 
+    def set_options(self, options: list[dict] | dict | None = None) -> None:
+        """Options for the next :meth:`reset`: one dict for every sub-env, or a list of
+        exactly ``num_envs`` dicts (None entries mean no options).
+
+        Raises
+        ------
+        ValueError
+            If a list has the wrong length (each sub-env must be reset exactly once).
+        TypeError
+            If ``options`` or an entry is not a dict (or None).
+        """
+        if options is None or isinstance(options, dict):
+            super().set_options(options)
+            return
+        if isinstance(options, (str, bytes)) or not isinstance(options, Sequence):
+            raise TypeError(f"options must be a dict, a list of {self.num_envs} dicts or None, "
+                            f"got {type(options).__name__}")
+        if len(options) != self.num_envs:
+            raise ValueError(f"options has {len(options)} entries but there are "
+                             f"{self.num_envs} sub-envs; give one dict per sub-env or a single "
+                             "dict for all")
+        bad = [i for i, o in enumerate(options) if o is not None and not isinstance(o, dict)]
+        if bad:
+            raise TypeError(f"options[{bad[0]}] must be a dict or None, got "
+                            f"{type(options[bad[0]]).__name__}")
+        super().set_options([dict(o or {}) for o in options])
+
     def step_async(self, actions: np.ndarray) -> None:
         self._actions = actions
 

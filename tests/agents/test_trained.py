@@ -15,7 +15,7 @@ from tether_gym_agents.trained import TrainedAgent, pretrained_agents
 def test_shipped_agent_loads_and_acts(algo):
     shipped = pretrained_agents()
     assert algo in shipped, f"no shipped {algo} agent in {sorted(shipped)}"
-    for name in ("config.yml", "command.txt", "train_info.json", "vecnormalize.pkl",
+    for name in ("config.yml", "command.txt", "train_info.json", "agent.json", "policy.safetensors",
                  "learning_curve.png", "eval/evaluations.npz"):
         assert (shipped[algo] / name).is_file(), name
     agent = TrainedAgent.load(shipped[algo])

@@ -24,7 +24,9 @@ def test_train_then_evaluate(tmp_path, algo):
         extra += ["--config", str(_tiny_sac_config(tmp_path))]
     assert main(["--algo", algo, "--out", str(out), *extra, *TINY]) == 0
     for name in ("config.yml", "args.yml", "command.txt", "vecnormalize.pkl", "final_model.zip",
-                 "best_model.zip", "train_info.json", "eval/evaluations.npz"):
+                 "best_model.zip", "train_info.json", "eval/evaluations.npz",
+                 "agent.json", "policy.safetensors", "final_agent/agent.json",
+                 "final_agent/policy.safetensors", "learning_curve.png"):
         assert (out / name).is_file(), name
     cfg = yaml.safe_load((out / "config.yml").read_text())
     assert cfg["algo"] == algo and cfg["env_kwargs"]["orbits_per_episode"] == 0.05
@@ -106,8 +108,9 @@ def test_env_kwargs_parsed_safely():
                                "accel_limit=None"])
     assert parsed == {"eccentricity": 0.3, "masses": (1, 2), "gravity": "full",
                       "accel_limit": None}
-    # code is never evaluated: it stays a string
-    assert parse_env_kwargs(["x=__import__('os').getcwd()"])["x"] == "__import__('os').getcwd()"
+    # code is never evaluated: it is not a literal, so it is refused
+    with pytest.raises(ConfigError, match="is not a Python literal"):
+        parse_env_kwargs(["x=__import__('os').getcwd()"])
     with pytest.raises(ConfigError, match="key=value"):
         parse_env_kwargs(["eccentricity"])
 
@@ -117,9 +120,12 @@ def test_unknown_env_id_suggests(tmp_path, capsys):
     assert "did you mean 'tether_gym/TetherLibration-v0'" in capsys.readouterr().err
 
 
-def test_bad_env_kwarg_is_reported(tmp_path):
-    with pytest.raises(ValueError, match="eccentricity"):
-        main(["--out", str(tmp_path), "--timesteps", "8", "--env-kwargs", "eccentricity=1.5"])
+def test_bad_env_kwarg_is_reported(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["--out", str(out), "--timesteps", "8", "--env-kwargs", "eccentricity=1.5"]) == 2
+    err = capsys.readouterr().err
+    assert "--env-kwargs eccentricity=1.5" in err and "eccentricity" in err
+    assert not out.exists()  # rejected before any work
 
 
 def test_corrupt_or_missing_agent(tmp_path):
@@ -128,12 +134,12 @@ def test_corrupt_or_missing_agent(tmp_path):
     with pytest.raises(AgentLoadError, match="does not exist"):
         TrainedAgent.load(tmp_path / "nope")
     (tmp_path / "empty").mkdir()
-    with pytest.raises(AgentLoadError, match="no model file"):
+    with pytest.raises(AgentLoadError, match="no agent in"):
         TrainedAgent.load(tmp_path / "empty")
     bad = tmp_path / "bad"
     bad.mkdir()
     (bad / "final_model.zip").write_bytes(b"not a zip file")
-    with pytest.raises(AgentLoadError, match="not a stable-baselines3 model"):
+    with pytest.raises(AgentLoadError, match="refusing pickled"):
         TrainedAgent.load(bad)
     assert evaluate_main([str(bad), "--seeds", "1", "--suite", "paper", "--no-plots",
                           "--out", str(tmp_path / "ev")]) == 2
@@ -147,5 +153,7 @@ def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
     capsys.readouterr()
     assert main(["--algo", "sac", "--out", str(out), "--timesteps", "256", "--resume",
                  *TINY]) == 0
-    # 2 envs x 255 steps: the checkpoint at step 512 precedes storing that step's pair
-    assert "with its replay buffer (510 transitions)" in capsys.readouterr().out
+    # the final model keeps its replay buffer beside it: 2 envs x 256 steps
+    assert (out / "final_replay_buffer.pkl").is_file()
+    text = capsys.readouterr().out
+    assert "final_model.zip at step 512 with its replay buffer (512 transitions)" in text

@@ -105,6 +105,22 @@ def test_set_options_per_env():
     assert np.all(env.reset()[:, 0] == np.float32(np.sin(1.0)))
 
 
+@pytest.mark.parametrize("options", [[{}, {}], [{}, {}, {}, {}]])
+def test_set_options_of_the_wrong_length_is_an_error(options):
+    env = make_sb3_vec_env(3, seed=0)
+    with pytest.raises(ValueError, match=f"options has {len(options)} entries but there are 3 "
+                                         "sub-envs"):
+        env.set_options(options)
+    with pytest.raises(TypeError, match=r"options\[1\] must be a dict"):
+        env.set_options([{}, 5, {}])
+    with pytest.raises(TypeError, match="must be a dict, a list of 3 dicts or None"):
+        env.set_options("theta")
+    env.set_options([None, {"nu": 1.0}, None])  # None entries: no options
+    obs = env.reset()
+    assert obs[1, 0] == np.float32(np.sin(1.0)) and obs[0, 0] != obs[1, 0]
+    env.close()
+
+
 def test_attributes_methods_and_wrappers():
     env = make_sb3_vec_env(2, seed=0)
     env.reset()

@@ -1,0 +1,51 @@
+"""The shipped hyperparameter files work with rl-baselines3-zoo as they are."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+import tether_gym
+from tether_gym_agents.training import CONFIG_DIR, load_hyperparams
+
+TINY = {"ppo": ["n_envs:2", "n_steps:64", "batch_size:64"],
+        "sac": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"]}
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_env_id_block_is_complete_for_zoo(algo):
+    """rl_zoo3 reads only the env id's block (never `default`): it must hold everything."""
+    doc = yaml.safe_load((CONFIG_DIR / f"{algo}.yml").read_text())
+    block = doc[tether_gym.ENV_ID]
+    for key in ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs"):
+        assert key in block, key
+    # train.py's own keys stay out of zoo's way (zoo would pass them to the algorithm)
+    assert not {"eval_freq", "checkpoint_freq"} & set(block)
+    merged = load_hyperparams(CONFIG_DIR / f"{algo}.yml", algo, tether_gym.ENV_ID)
+    assert merged == {**doc["default"], **block}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_rl_zoo3_trains_with_the_shipped_config(tmp_path, algo):
+    # not imported here: importing rl_zoo3 patches gymnasium's TimeLimit for the whole process
+    if importlib.util.find_spec("rl_zoo3") is None:
+        pytest.skip("rl_zoo3 is not installed: pip install -e '.[test]' installs it")
+    cmd = [sys.executable, "-m", "rl_zoo3.train", "--algo", algo, "--env", tether_gym.ENV_ID,
+           "--gym-packages", "tether_gym", "--conf-file", str(CONFIG_DIR / f"{algo}.yml"),
+           "-n", "256", "--eval-freq", "-1", "--save-freq", "-1", "-f", str(tmp_path),
+           "--seed", "0", "--device", "cpu", "--hyperparams", *TINY[algo]]
+    env = {**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    run = tmp_path / algo / "tether_gym-TetherLibration-v0_1"
+    assert (run / "tether_gym-TetherLibration-v0.zip").is_file()
+    # zoo printed the hyperparameters it read: the file's env kwargs and normalisation
+    assert "Using 'default' hyperparameters" not in proc.stdout
+    assert "'eccentricity_range': [0.0, 0.35]" in proc.stdout
+    assert "'mass_range': 0.25" in proc.stdout and "'norm_obs': True" in proc.stdout
