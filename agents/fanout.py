@@ -45,6 +45,7 @@ import json
 import logging
 import os
 import re
+import sys
 import time
 from dataclasses import dataclass
 from enum import Enum
@@ -53,7 +54,8 @@ from pathlib import Path
 from .training import ConfigError, load_hyperparams, parse_env_kwargs
 
 __all__ = ["RAY_PIP", "RunState", "SeedJob", "run_from_args", "run_jobs", "init_ray",
-           "run_state", "train_seed", "seed_argv", "target_timesteps"]
+           "require_ray", "run_state", "train_seed", "seed_argv", "target_timesteps",
+           "config_path"]
 
 RAY_PIP = 'pip install "tether_gym[ray]"'
 #: Environment of every Ray task: one numba, OpenMP and MKL thread per run.
@@ -62,6 +64,8 @@ TASK_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS":
 #: latest checkpoint; the next ones top up if the resume had to fall back further.
 MAX_CALLS = 3
 _STEPS_IN_NAME = re.compile(r"_(\d+)_steps")
+INTERRUPTED = ("interrupted: run the same command again to resume the unfinished runs from "
+               "their last checkpoints (finished runs are skipped)")
 
 
 class RunState(Enum):
@@ -94,7 +98,8 @@ class SeedJob:
     target: int
 
 
-def _ray_or_error():
+def require_ray():
+    """``import ray``, or a ConfigError with the pip command when it is missing."""
     try:
         import ray
     except ImportError as exc:
@@ -113,7 +118,7 @@ def init_ray(address: str | None = None) -> bool:
         None uses ``RAY_ADDRESS`` when it is set, else starts a local instance with
         ``num_cpus=os.cpu_count()`` and no dashboard.
     """
-    ray = _ray_or_error()
+    ray = require_ray()
     if ray.is_initialized():
         return False
     address = address or os.environ.get("RAY_ADDRESS") or None
@@ -132,11 +137,12 @@ def target_timesteps(args: argparse.Namespace) -> int:
         if args.timesteps < 1:
             raise ConfigError(f"--timesteps must be >= 1, got {args.timesteps}")
         return int(args.timesteps)
-    params = load_hyperparams(_config_path(args), args.algo, args.env_id)
+    params = load_hyperparams(config_path(args), args.algo, args.env_id)
     return int(params.get("n_timesteps", 1e5))
 
 
-def _config_path(args) -> Path:
+def config_path(args) -> Path:
+    """The hyperparameter file of a run: ``--config``, else the packaged ``<algo>.yml``."""
     from .training import CONFIG_DIR
 
     return Path(args.config) if args.config else CONFIG_DIR / f"{args.algo}.yml"
@@ -316,7 +322,7 @@ def run_jobs(jobs: list[SeedJob], *, address: str | None = None, threads: int = 
             report(res)
             results.append(res)
         return results
-    ray = _ray_or_error()
+    ray = require_ray()
     started = init_ray(address)
     try:
         remote = ray.remote(num_cpus=threads, max_retries=0)(train_seed)
@@ -369,10 +375,10 @@ def run_from_args(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is a file; --seeds needs a folder for seed_K/ runs")
     target = target_timesteps(args)
-    load_hyperparams(_config_path(args), args.algo, args.env_id)  # a bad config fails here
+    load_hyperparams(config_path(args), args.algo, args.env_id)  # a bad config fails here
     use_ray = args.seeds > 1 or bool(args.ray_address or os.environ.get("RAY_ADDRESS"))
     if use_ray:
-        _ray_or_error()
+        require_ray()
     jobs = []
     for seed in range(args.seed, args.seed + args.seeds):
         run_dir = out / f"seed_{seed}"
@@ -381,8 +387,12 @@ def run_from_args(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         jobs.append(SeedJob(f"seed {seed}", run_dir, tuple(argv), target))
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    results = run_jobs(jobs, address=args.ray_address, threads=args.torch_threads,
-                       use_ray=use_ray, summary_log=out / "fanout.log")
+    try:
+        results = run_jobs(jobs, address=args.ray_address, threads=args.torch_threads,
+                           use_ray=use_ray, summary_log=out / "fanout.log")
+    except KeyboardInterrupt:
+        print(INTERRUPTED, file=sys.stderr)
+        return 130
     failed = [r for r in results if r["status"] == "failed"]
     print(f"{len(results) - len(failed)}/{len(results)} seeds complete in {out} "
           f"({time.perf_counter() - t0:.0f} s)")

@@ -52,11 +52,21 @@ import itertools
 import json
 import math
 import statistics
+import sys
 import time
 from enum import Enum
 from pathlib import Path
 
-from .fanout import SeedJob, _config_path, _ray_or_error, init_ray, run_jobs, seed_argv, train_seed
+from .fanout import (
+    INTERRUPTED,
+    SeedJob,
+    config_path,
+    init_ray,
+    require_ray,
+    run_jobs,
+    seed_argv,
+    train_seed,
+)
 from .training import ConfigError, load_hyperparams, parse_env_kwargs
 
 __all__ = ["Search", "SweepSpec", "load_sweep", "expand_trials", "apply_overrides",
@@ -328,7 +338,7 @@ def run_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     out = Path(args.out or Path("runs") / f"{args.algo}_sweep").absolute()
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is a file; --sweep needs a folder")
-    base = load_hyperparams(_config_path(args), args.algo, args.env_id)
+    base = load_hyperparams(config_path(args), args.algo, args.env_id)
     target = spec.timesteps or args.timesteps or int(base.get("n_timesteps", 1e5))
     seeds = range(args.seed, args.seed + spec.seeds_per_trial)
     out.mkdir(parents=True, exist_ok=True)
@@ -345,8 +355,12 @@ def run_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
                     tuple(_seed_args(parser, args, config, s, out / f"trial_{i:03d}", target)),
                     target)
             for i, config in enumerate(configs) for s in seeds]
-    results = run_jobs(jobs, address=args.ray_address, threads=args.torch_threads,
-                       summary_log=out / "fanout.log")
+    try:
+        results = run_jobs(jobs, address=args.ray_address, threads=args.torch_threads,
+                           summary_log=out / "fanout.log")
+    except KeyboardInterrupt:
+        print(INTERRUPTED, file=sys.stderr)
+        return 130
     ranked = rank_trials([
         {"name": f"trial_{i:03d}", "params": t,
          "returns": [final_eval_return(out / f"trial_{i:03d}" / f"seed_{s}") for s in seeds]}
@@ -371,7 +385,7 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
     except ImportError:
         raise ConfigError(f"search: optuna needs Optuna, which is not installed: {OPTUNA_PIP} "
                           "(or use search: random)") from None
-    _ray_or_error()
+    require_ray()
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
