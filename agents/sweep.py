@@ -40,8 +40,13 @@ seed folder is a single run that ``train.py --config trial_NNN/hyperparams.yml
 overrides ``seeds_per_trial``.
 
 ``search: optuna`` runs the trials as Ray Tune trials with Optuna's sampler
-(``pip install optuna``) and ASHA: every trial trains its seeds chunk by chunk
-(resuming each run) and reports the median over its seeds after every chunk.
+(``pip install optuna``) and ASHA: every trial trains its seeds one after the other,
+chunk by chunk (resuming each run), and reports the median over its seeds after
+every chunk; ASHA stops the trials whose median falls behind, and the table lists
+them after the complete ones, with the step at which they stopped. Its trial folders
+are named by Tune's trial id (``trial_1a2b3c4d``) and Tune keeps its own experiment
+state in ``<out>/tune`` (its ``storage_path``); unlike grid and random sweeps, a
+rerun of an Optuna sweep starts new trials.
 """
 
 from __future__ import annotations
@@ -390,9 +395,10 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
+    names = {f"p{i}": key for i, key in enumerate(spec.params)}  # Tune splits keys at "/"
     space = {}
-    for key, (kind, arg) in spec.params.items():
-        name = key.replace(".", "/")  # Tune reads dots in a key as nesting
+    for name, key in names.items():
+        kind, arg = spec.params[key]
         if kind == "values":
             space[name] = tune.choice([json.dumps(v) for v in arg])  # lists as JSON strings
         elif kind == "uniform":
@@ -401,11 +407,15 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
             space[name] = tune.loguniform(*arg)
         else:
             space[name] = tune.randint(arg[0], arg[1] + 1)
+
+    def overrides_of(config):
+        return {names[n]: json.loads(v) if spec.params[names[n]][0] == "values" else v
+                for n, v in config.items()}
+
     chunks = spec.asha["chunks"]
 
     def trial_fn(config):
-        overrides = {k.replace("/", "."): (json.loads(v) if spec.params[k.replace("/", ".")][0]
-                                           == "values" else v) for k, v in config.items()}
+        overrides = overrides_of(config)
         trial_dir = out / f"trial_{tune.get_context().get_trial_id()}"
         cfg = _trial_config(base, overrides, trial_dir, args.algo, args.env_id)
         for chunk in range(1, chunks + 1):
@@ -443,8 +453,7 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
     for result in grid:
         if result.config is None:
             continue
-        overrides = {k.replace("/", "."): (json.loads(v) if spec.params[k.replace("/", ".")][0]
-                                           == "values" else v) for k, v in result.config.items()}
+        overrides = overrides_of(result.config)
         metrics = result.metrics or {}
         returns = metrics.get("returns") or [float("nan")]
         name = f"trial_{metrics.get('trial_id', '?')}"

@@ -191,3 +191,15 @@ def test_without_ray(tmp_path, capsys, monkeypatch, tiny):
     assert main(["--seeds", "1", "--seed", "3", "--out", str(tmp_path / "fan"), "--timesteps",
                  "256", *tiny]) == 0
     assert _info(tmp_path / "fan" / "seed_3")["seed"] == 3
+
+
+def test_failed_seed_is_reported(tmp_path, capsys, monkeypatch, tiny):
+    monkeypatch.setitem(sys.modules, "ray", None)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    out = tmp_path / "fan"
+    assert main(["--seeds", "1", "--out", str(out), "--timesteps", "256", *tiny,
+                 "--env-kwargs", "eccentricity=1.5"]) == 1
+    printed = capsys.readouterr().out
+    assert "seed 0: FAILED" in printed and "eccentricity" in printed
+    assert "Traceback" in (out / "seed_0" / "train.log").read_text()
+    assert "FAILED" in (out / "fanout.log").read_text()

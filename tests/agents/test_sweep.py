@@ -160,3 +160,24 @@ def test_two_configs_two_seeds_ranked_by_median(ray_session, tmp_path, capsys):
     capsys.readouterr()
     assert main(argv) == 0  # a rerun trains nothing and writes the same table
     assert capsys.readouterr().out.count("already finished") == 4
+
+
+@pytest.mark.slow
+def test_optuna_asha_sweep(ray_session, tmp_path, capsys):
+    pytest.importorskip("optuna")
+    sweep = _sweep_file(tmp_path, {
+        "search": "optuna", "seeds_per_trial": 2, "num_samples": 2, "timesteps": 512,
+        "asha": {"chunks": 2}, "params": {"learning_rate": {"loguniform": [1.0e-5, 1.0e-2]},
+                                          "n_steps": [128]}})
+    out = tmp_path / "opt"
+    assert main(["--algo", "ppo", "--sweep", str(sweep), "--out", str(out), *TINY]) == 0
+    trials = sorted(out.glob("trial_*"))
+    assert len(trials) == 2
+    with open(out / "sweep_results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 2
+    for row in rows:  # every trial row is the median of its own seeds' final evaluations
+        trial = out / row["trial"].split()[0]
+        assert (trial / "seed_0" / "train_info.json").is_file()
+        returns = [final_eval_return(trial / f"seed_{s}") for s in (0, 1)]
+        assert float(row["median return"]) == pytest.approx(statistics.median(returns), rel=1e-3)
