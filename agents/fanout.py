@@ -122,12 +122,23 @@ def init_ray(address: str | None = None) -> bool:
     if ray.is_initialized():
         return False
     address = address or os.environ.get("RAY_ADDRESS") or None
-    common = {"logging_level": logging.WARNING, "log_to_driver": False,
-              "runtime_env": {"env_vars": dict(TASK_ENV)}}
-    if address:
-        ray.init(address=address, **common)
-    else:
-        ray.init(num_cpus=os.cpu_count(), include_dashboard=False, **common)
+    quiet = {"logging_level": logging.WARNING, "log_to_driver": False}
+    if address:  # the workers of other nodes get the thread settings as a runtime env
+        ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
+        return True
+    # A local instance's workers inherit the environment of the processes ray.init
+    # starts: the same settings without a runtime env, whose set-up was measured to
+    # add about 4 s to the first tasks on a busy 2-core machine.
+    saved = {k: os.environ.get(k) for k in TASK_ENV}
+    os.environ.update(TASK_ENV)
+    try:
+        ray.init(num_cpus=os.cpu_count(), include_dashboard=False, **quiet)
+    finally:
+        for key, value in saved.items():
+            if value is None:
+                os.environ.pop(key, None)
+            else:
+                os.environ[key] = value
     return True
 
 
@@ -178,9 +189,12 @@ def run_state(run_dir: Path, target: int) -> tuple[RunState, int]:
     """State of a run folder and the env steps it has saved [-].
 
     ``DONE`` when ``train_info.json`` records ``num_timesteps >= target``;
-    ``PARTIAL`` when a checkpoint (its step count in its file name) or a finished
-    shorter run is there; ``NEW`` otherwise (including a folder killed before its
-    first checkpoint, or one without ``config.yml``, which ``--resume`` needs).
+    ``PARTIAL`` when a checkpoint (``checkpoints/model*_<N>_steps*``: the largest N
+    counts) or a finished shorter run is there; ``NEW`` otherwise (including a
+    folder killed before its first checkpoint, or one without ``config.yml``, which
+    ``--resume`` needs). The step count only sizes the first ``--resume`` call; the
+    resume logic of the single run chooses the checkpoint, and :func:`train_seed`
+    tops up if it had to fall back to an earlier one.
     """
     run_dir = Path(run_dir)
     info = run_dir / "train_info.json"
@@ -196,7 +210,7 @@ def run_state(run_dir: Path, target: int) -> tuple[RunState, int]:
     if ckpt_dir.is_dir():
         for path in ckpt_dir.iterdir():
             match = _STEPS_IN_NAME.search(path.name)
-            if match and path.name.startswith("model_") and path.suffix == ".zip":
+            if match and path.name.startswith("model"):  # any saved piece of a checkpoint
                 steps = max(steps, int(match.group(1)))
     if steps > 0 and (run_dir / "config.yml").is_file():
         return RunState.PARTIAL, steps
@@ -241,10 +255,13 @@ def train_seed(job: SeedJob, threads: int = 1) -> dict:
             if state is RunState.NEW:
                 argv = list(job.argv)
             else:
+                # a checkpoint at the target without the final files still needs a call
                 argv = [*_without_timesteps(job.argv), "--resume", "--timesteps",
-                        str(job.target - steps)]
+                        str(max(job.target - steps, 1))]
             print(f"==== {time.strftime('%Y-%m-%d %H:%M:%S')} {job.label}: {state.value} at "
-                  f"step {steps}/{job.target}: train.py {' '.join(argv)}", flush=True)
+                  f"step {steps}/{job.target} (torch threads {torch.get_num_threads()}, numba "
+                  f"threads {numba.get_num_threads()}, pid {os.getpid()}): train.py "
+                  f"{' '.join(argv)}", flush=True)
             try:
                 rc = train_main(argv)
             except Exception as exc:  # reported per seed; the other seeds go on

@@ -76,7 +76,9 @@ def test_two_seeds_are_single_runs(fanned, tmp_path, tiny):
             assert (run / name).is_file(), (seed, name)
         info = _info(run)
         assert info["seed"] == seed and info["num_timesteps"] == TARGET
-        assert "total_timesteps" in (run / "train.log").read_text()  # SB3's progress table
+        log = (run / "train.log").read_text()
+        assert "total_timesteps" in log  # SB3's progress table
+        assert "(torch threads 1, numba threads 1, pid" in log
     assert f"--out {fanned / 'seed_1'}" in (fanned / "seed_1" / "command.txt").read_text()
     summary = (fanned / "fanout.log").read_text()
     assert "seed 0: trained in" in summary and "seed 1: trained in" in summary
@@ -153,8 +155,9 @@ def test_run_state(tmp_path):
     run = tmp_path / "run"
     assert run_state(run, 100) == (RunState.NEW, 0)
     (run / "checkpoints").mkdir(parents=True)
-    (run / "checkpoints" / "model_64_steps.zip").write_bytes(b"")
-    (run / "checkpoints" / "model_vecnormalize_96_steps.pkl").write_bytes(b"")
+    for name in ("model_32_steps.zip", "model_64_steps.zip", "model_vecnormalize_64_steps.pkl",
+                 "notes_128_steps.txt"):
+        (run / "checkpoints" / name).write_bytes(b"")
     assert run_state(run, 100) == (RunState.NEW, 64)  # no config.yml: --resume cannot work
     (run / "config.yml").write_text("hyperparams: {}\n")
     assert run_state(run, 100) == (RunState.PARTIAL, 64)
