@@ -124,7 +124,15 @@ def init_ray(address: str | None = None) -> bool:
     address = address or os.environ.get("RAY_ADDRESS") or None
     quiet = {"logging_level": logging.WARNING, "log_to_driver": False}
     if address:  # the workers of other nodes get the thread settings as a runtime env
-        ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
+        try:
+            ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
+        except (ConnectionError, RuntimeError) as exc:
+            raise ConfigError(
+                f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
+                f"({type(exc).__name__}: {str(exc).splitlines()[0]}). Start it with `ray start "
+                f"--head` and give its address; a cluster with token authentication needs its "
+                f"token here too (RAY_AUTH_MODE=token and RAY_AUTH_TOKEN, as on its nodes)"
+            ) from exc
         return True
     # A local instance's workers inherit the environment of the processes ray.init
     # starts: the same settings without a runtime env, whose set-up was measured to
@@ -132,7 +140,8 @@ def init_ray(address: str | None = None) -> bool:
     saved = {k: os.environ.get(k) for k in TASK_ENV}
     os.environ.update(TASK_ENV)
     try:
-        ray.init(num_cpus=os.cpu_count(), include_dashboard=False, **quiet)
+        # "local": a new instance even when a `ray start` cluster runs on this machine
+        ray.init(address="local", num_cpus=os.cpu_count(), include_dashboard=False, **quiet)
     finally:
         for key, value in saved.items():
             if value is None:
