@@ -8,12 +8,14 @@ runs/ppo/seed_K`` would get (``command.txt`` in the folder records it), so a see
 folder is exactly a single-seed run folder.
 
 Where the tasks run
-    By default a local Ray instance sized to the machine (``num_cpus=os.cpu_count()``,
-    no dashboard); ``--ray-address auto|HOST:PORT`` (or the ``RAY_ADDRESS``
-    environment variable) connects to an existing cluster instead. Each task asks
-    for ``--torch-threads`` CPUs (default 1) and runs with one torch thread and one
-    numba thread (``NUMBA_NUM_THREADS=1``, ``OMP_NUM_THREADS=1`` and
-    ``MKL_NUM_THREADS=1`` in the tasks' runtime environment). On a cluster ``--out``
+    By default a new local Ray instance sized to the machine
+    (``num_cpus=os.cpu_count()``, no dashboard), stopped at the end;
+    ``--ray-address auto|HOST:PORT`` (or the ``RAY_ADDRESS`` environment variable)
+    connects to an existing cluster instead. Each task asks for ``--torch-threads``
+    CPUs (default 1) and runs with that many torch threads and one numba thread
+    (``NUMBA_NUM_THREADS=1``, ``OMP_NUM_THREADS=1`` and ``MKL_NUM_THREADS=1``: the
+    local workers inherit them, a cluster's get them as the job's runtime
+    environment); each seed's log states the counts it ran with. On a cluster ``--out``
     must be a path every node sees (a shared NFS mount): the tasks write the run
     folders there directly, and relative paths given on the command line are made
     absolute on the machine that runs ``train.py``.
@@ -34,7 +36,8 @@ Progress
 
 Ray is an optional dependency (``pip install "tether_gym[ray]"``); a single-seed
 ``train.py`` never imports it, and neither does ``--seeds 1`` without
-``--ray-address``.
+``--ray-address`` or ``RAY_ADDRESS`` (it trains in this process). Ctrl-C stops every
+task; the same command then resumes them.
 """
 
 from __future__ import annotations
