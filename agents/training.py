@@ -291,6 +291,16 @@ def _build_parser() -> argparse.ArgumentParser:
                         "on 2-core machines under load)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", type=int, default=0)
+    fan = p.add_argument_group("many runs on Ray (pip install \"tether_gym[ray]\")")
+    fan.add_argument("--seeds", type=int, default=None, metavar="N",
+                     help="train seeds --seed ... --seed+N-1 into <out>/seed_K/, one Ray task "
+                          "each; re-running skips finished seeds and resumes interrupted ones")
+    fan.add_argument("--ray-address", default=None, metavar="auto|HOST:PORT",
+                     help="existing Ray cluster (default: $RAY_ADDRESS, else a local instance "
+                          "with one CPU per run)")
+    fan.add_argument("--sweep", type=Path, default=None, metavar="FILE.yml",
+                     help="search config keys x several seeds per trial, rank by the median "
+                          "final evaluation return (file format: tether_gym_agents.sweep)")
     return p
 
 
@@ -567,6 +577,10 @@ def main(argv=None) -> int:
     parser = _build_parser()
     args = parser.parse_args(sys.argv[1:] if argv is None else argv)
     try:
+        if args.seeds is not None or args.sweep is not None or args.ray_address is not None:
+            from .fanout import run_from_args  # Ray is imported there only
+
+            return run_from_args(args, parser)
         return _train(args, argv)
     except ConfigError as exc:
         print(f"train.py: error: {exc}", file=sys.stderr)
