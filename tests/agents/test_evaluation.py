@@ -270,3 +270,20 @@ def test_plots_mark_failures_title_the_scenario_and_skip_undefined(tmp_path, mon
     assert [t.get_text() for t in ax_conv.texts] == ["n/a", "n/a"]
     ax_succ = next(ax for ax in metrics_fig.axes if ax.get_title() == "success rate")
     assert len(ax_succ.get_lines()) == 4  # interval + point per policy
+
+
+def test_env_kwargs_are_literals_never_code():
+    from tether_gym_agents.env_kwargs import parse_env_kwargs
+
+    parsed = parse_env_kwargs(["masses=(1,2.5)", "gravity=full", "obs_noise=1e-3",
+                               "init_theta_range=None", "parallel=false"])
+    assert parsed == {"masses": (1, 2.5), "gravity": "full", "obs_noise": 1e-3,
+                      "init_theta_range": None, "parallel": False}
+    for bad, words in (("x=__import__('os').system('true')", "not a Python literal"),
+                       ("masses=(1,2", "not a Python literal"), ("1x=2", "not a valid"),
+                       ("novalue", "key=value")):
+        with pytest.raises(ValueError, match=words) as exc:
+            parse_env_kwargs([bad])
+        assert str(exc.value).startswith("--env-kwargs")
+    with pytest.raises(ValueError, match="given twice"):
+        parse_env_kwargs(["a=1", "a=2"])
