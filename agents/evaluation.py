@@ -41,8 +41,8 @@ from .metrics import episode_metrics
 from .rollout import Trajectory, rollout
 from .scenarios import Scenario, describe_suites, get_suite
 
-__all__ = ["main", "evaluate", "resolve_policy", "PolicyKind", "PolicySpec", "BASELINES",
-           "MAX_SEEDS"]
+__all__ = ["main", "evaluate", "resolve_policy", "make_policy", "PolicyKind", "PolicySpec",
+           "BASELINES", "MAX_SEEDS"]
 
 BASELINES = ("smc", "zero", "periodic", "random")
 MAX_SEEDS = 1000
@@ -153,6 +153,17 @@ def resolve_policy(name: str) -> PolicySpec:
                          "agent (run folder, model file or folder of seed_K run folders)")
     runs = _seed_runs(path) or [path]
     return PolicySpec(name, PolicyKind.RL, runs)
+
+
+def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):
+    """Policy object with ``predict`` for a baseline name or a trained agent (its first run).
+
+    ``env`` is a TetherLibration env; ``scenario`` gives the nominal model of ``smc``
+    (model mismatch); ``seed`` seeds ``random``.
+    """
+    spec = resolve_policy(name)
+    spec.load()
+    return spec.policies(0, env, scenario or Scenario("env", ""), [seed])[0]
 
 
 @dataclass
