@@ -90,6 +90,17 @@ def agent_files(path: Path) -> dict:
     return {p.name: _sha256(p) for p in files}
 
 
+def display_path(path) -> str:
+    """``path`` relative to the repository (or working directory) when inside it."""
+    path = Path(path).resolve()
+    for root in (Path(__file__).resolve().parent.parent, Path.cwd()):
+        try:
+            return str(path.relative_to(root))
+        except ValueError:
+            continue
+    return str(path)
+
+
 def _git_commit() -> dict | None:
     root = Path(__file__).resolve().parent.parent
     if not (root / ".git").exists():
@@ -133,7 +144,8 @@ def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
         "platform": platform.platform(),
         "threads": threads,
         "torch_threads_requested": torch_threads,
-        "agents": {s.name: [{"path": str(p), "files": agent_files(p)} for p in s.runs]
+        "agents": {s.name: [{"path": display_path(p), "files": agent_files(p)}
+                            for p in s.runs]
                    for s in specs if s.kind.value != "baseline"},
     }
 
@@ -151,7 +163,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
     for spec in specs:
         eps = by_policy[spec.name]
         block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
-                 "runs": [None if p is None else str(p) for p in spec.runs],
+                 "runs": [None if p is None else display_path(p) for p in spec.runs],
                  "n_episodes": len(eps)}
         for m in METRICS:
             block[m] = iqm(scores[spec.name][m])
