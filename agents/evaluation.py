@@ -356,13 +356,19 @@ def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 
 
 def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
+    import textwrap
+
     from .paper.cli import add_arguments as add_paper_arguments
 
-    epilog = (describe_suites() + "\n\nThe table reports, per policy, the interquartile "
-              "mean over training runs x scenarios of each run's mean over its episodes, "
-              "with a 95 % stratified-bootstrap interval (2 runs or more) and the "
-              "probability of improvement over smc.\n\nReproduce the paper instead: "
-              "evaluate.py paper --out DIR (alias: evaluate.py --paper --out DIR).")
+    notes = (
+        "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
+        "description: ..., env_kwargs: {...}, nominal: {masses: [...], eccentricity: ...}}]'.",
+        "The table reports, per policy, the interquartile mean over training runs x "
+        "scenarios of each run's mean over its episodes, with a 95 % stratified-bootstrap "
+        "interval (2 runs or more) and the probability of improvement over smc.",
+        "Reproduce the paper instead: evaluate.py paper --out DIR (alias: evaluate.py "
+        "--paper --out DIR).")
+    epilog = "\n\n".join([describe_suites(), *(textwrap.fill(n, 79) for n in notes)])
     top = argparse.ArgumentParser(
         prog="evaluate.py", formatter_class=argparse.RawDescriptionHelpFormatter,
         description="Benchmark policies on tether_gym scenario suites (evaluate.py [bench] "
