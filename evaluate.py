@@ -1,4 +1,5 @@
-"""Evaluate policies on the scenario suite or reproduce the paper: ``python evaluate.py -h``."""
+"""Benchmark policies (``python evaluate.py [bench] ...``) or reproduce the paper
+(``python evaluate.py paper --out DIR``): ``python evaluate.py -h``."""
 import sys
 
 from tether_gym_agents.evaluation import main

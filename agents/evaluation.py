@@ -1,256 +1,436 @@
 """Benchmark any mix of policies on a scenario suite through one evaluation path.
 
-``python evaluate.py`` evaluates the shipped PPO and SAC agents beside the
-sliding-mode and open-loop baselines on the default suite and prints a markdown
-table; ``python evaluate.py --paper --out DIR`` reproduces the paper's figures
-instead (:mod:`tether_gym_agents.paper`).
+``python evaluate.py`` evaluates the shipped agents beside the sliding-mode and
+open-loop baselines on the default suite and prints the tables;
+``python evaluate.py paper --out DIR`` (alias ``--paper``) reproduces the paper's
+figures instead (:mod:`tether_gym_agents.paper`).
 
-Every policy, baseline or trained, is run by stable-baselines3's
-``evaluate_policy`` on the same vectorised environment (one sub-env per seed,
-seeded ``seed + i``), and every episode's per-step ``info`` is turned into the
-metrics of :mod:`tether_gym_agents.metrics`.
+Every policy, baseline or trained, is a ``predict`` object run by
+:func:`tether_gym_agents.rollout.rollout` on the native vector env (one sub-env per
+seed, one observation per ``predict`` call, so an episode never depends on the number
+of seeds, the thread count or the order of the policies). Each episode becomes the
+metrics of :mod:`tether_gym_agents.metrics`; :mod:`tether_gym_agents.results` turns
+them into the statistics over training runs (:mod:`tether_gym_agents.stats`), the
+tables and ``results.json``.
+
+A policy is a baseline name (``smc``, ``zero``, ``periodic``, ``random``), a shipped
+agent (``ppo``, ``sac``, ...), a run folder or model file written by ``train.py``, or a
+folder of seed run folders (``runs/ppo/seed_0/``, ``seed_1/``, ...), which is one
+policy with one run per folder.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import math
+import re
+import shlex
 import sys
+import tempfile
 import time
+from dataclasses import dataclass, field
+from enum import Enum
 from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import tether_gym
-from tether_gym.physics import TetherChain
 
-from .metrics import aggregate, episode_metrics
-from .scenarios import Scenario, get_suite
+from .env_kwargs import parse_env_kwargs
+from .metrics import episode_metrics
+from .rollout import Trajectory, rollout
+from .scenarios import Scenario, describe_suites, get_suite
 
-__all__ = ["main", "evaluate", "make_policy", "BASELINES"]
+__all__ = ["main", "evaluate", "resolve_policy", "make_policy", "PolicyKind", "PolicySpec",
+           "BASELINES", "MAX_SEEDS"]
 
 BASELINES = ("smc", "zero", "periodic", "random")
-TABLE_COLUMNS = (
-    ("success", "success_rate"),
-    ("tracking_rms", "tracking RMS [rad]"),
-    ("final_error", "last-orbit max err [rad]"),
-    ("converge_orbits", "converge [orbits]"),
-    ("min_tension", "min T^ [-]"),
-    ("reel_effort", "reel effort [-]"),
-    ("reel_excursion", "reel excursion [-]"),
-    ("chattering", "chattering [-]"),
-)
-FAILURES = ("slack", "tumble", "length")
+MAX_SEEDS = 1000
+"""Upper bound of ``--seeds`` (episodes per scenario and run)."""
+MAX_SEED = 2**31 - 1
+_SEED_DIR = re.compile(r"seed_(\d+)\Z")
+
+
+class PolicyKind(Enum):
+    """What a policy is, as recorded in results.json."""
+
+    BASELINE = "baseline"
+    RL = "rl"
+    HYBRID = "hybrid"  # reserved: a learning policy on top of a model-based law
+
+
+@dataclass
+class PolicySpec:
+    """A policy to evaluate: its name, kind and training runs.
+
+    ``runs`` holds one path per training run of a trained policy, ``[None]`` for a
+    baseline (one "run"). Trained agents are loaded once (:meth:`load`).
+    """
+
+    name: str
+    kind: PolicyKind
+    runs: list
+    agents: list = field(default_factory=list)
+
+    @property
+    def n_runs(self) -> int:
+        return len(self.runs)
+
+    def load(self) -> None:
+        """Load every run's agent with ``TrainedAgent.load`` (no-op for baselines)."""
+        from .trained import TrainedAgent
+
+        if self.kind is PolicyKind.BASELINE or self.agents:
+            return
+        self.agents = [TrainedAgent.load(path) for path in self.runs]
+
+    def policies(self, run: int, env, scenario: Scenario, seeds: list[int]) -> list:
+        """One ``predict`` object per seed for ``run`` on the env of ``scenario``.
+
+        Deterministic policies are shared; ``random`` gets a generator per episode,
+        seeded with the episode's seed, so that its actions do not depend on the other
+        episodes.
+        """
+        from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
+        from .smc import SlidingModeController
+
+        if self.kind is not PolicyKind.BASELINE:
+            return [self.agents[run]] * len(seeds)
+        if self.name == "random":
+            return [RandomPolicy(env, seed=s) for s in seeds]
+        if self.name == "smc":
+            nominal = None
+            if scenario.nominal is not None:
+                from tether_gym.physics import TetherChain
+
+                cfg = env.unwrapped.config
+                nominal = TetherChain(scenario.nominal["masses"],
+                                      scenario.nominal["eccentricity"], cfg.gravity,
+                                      cfg.total_tether_length / cfg.semi_latus_rectum)
+            policy = SlidingModeController.for_env(env, nominal=nominal)
+        elif self.name == "zero":
+            policy = ZeroStateReel.for_env(env)
+        else:
+            policy = PeriodicReel.for_env(env)
+        return [policy] * len(seeds)
+
+
+def _seed_runs(path: Path) -> list[Path]:
+    """The ``seed_K`` sub-folders of ``path``, by K (empty if none)."""
+    if not path.is_dir():
+        return []
+    found = [(int(m.group(1)), p) for p in path.iterdir()
+             if p.is_dir() and (m := _SEED_DIR.match(p.name))]
+    return [p for _, p in sorted(found)]
+
+
+def shipped_agents() -> dict[str, Path]:
+    """Shipped agents: run folders and folders of seed run folders in ``pretrained/``."""
+    from .trained import PRETRAINED_DIR, pretrained_agents
+
+    found = dict(pretrained_agents())
+    if PRETRAINED_DIR.is_dir():
+        for path in sorted(PRETRAINED_DIR.iterdir()):
+            if path.name not in found and _seed_runs(path):
+                found[path.name] = path
+    return dict(sorted(found.items()))
+
+
+def resolve_policy(name: str) -> PolicySpec:
+    """PolicySpec of a baseline name, a shipped agent's name or a path.
+
+    Raises ValueError listing the valid names when ``name`` is none of these.
+    """
+    if name in BASELINES:
+        return PolicySpec(name, PolicyKind.BASELINE, [None])
+    shipped = shipped_agents()
+    path = shipped.get(name)
+    if path is None and Path(name).exists():
+        path = Path(name)
+    if path is None:
+        valid = list(BASELINES) + list(shipped)
+        raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
+                         "agent (run folder, model file or folder of seed_K run folders)")
+    runs = _seed_runs(path) or [path]
+    return PolicySpec(name, PolicyKind.RL, runs)
 
 
 def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):
-    """Policy object with ``predict`` for a baseline name or a trained-agent path."""
-    from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
-    from .smc import SlidingModeController
-    from .trained import TrainedAgent, pretrained_agents
+    """Policy object with ``predict`` for a baseline name or a trained agent (its first run).
 
-    if name == "smc":
-        nominal = None
-        if scenario is not None and scenario.nominal is not None:
-            cfg = env.unwrapped.config
-            nominal = TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
-                                  cfg.gravity, cfg.total_tether_length / cfg.semi_latus_rectum)
-        return SlidingModeController.for_env(env, nominal=nominal)
-    if name == "zero":
-        return ZeroStateReel.for_env(env)
-    if name == "periodic":
-        return PeriodicReel.for_env(env)
-    if name == "random":
-        return RandomPolicy(env, seed=seed)
-    shipped = pretrained_agents()
-    if name in shipped:
-        return TrainedAgent.load(shipped[name])
-    if Path(name).exists():
-        return TrainedAgent.load(name)
-    valid = list(BASELINES) + sorted(shipped)
-    raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
-                     "agent (run folder or .zip)")
+    ``env`` is a TetherLibration env; ``scenario`` gives the nominal model of ``smc``
+    (model mismatch); ``seed`` seeds ``random``.
+    """
+    spec = resolve_policy(name)
+    spec.load()
+    return spec.policies(0, env, scenario or Scenario("env", ""), [seed])[0]
 
 
-def _run_scenario(policy_name: str, scenario: Scenario, seeds: list[int], record: bool):
-    """Episodes of one policy on one scenario: (list of metric dicts, infos of seed 0)."""
-    from stable_baselines3.common.evaluation import evaluate_policy
+@dataclass
+class _Setting:
+    """A scenario with its resolved env arguments and a probe env."""
 
-    from .vec_env import make_sb3_vec_env
+    scenario: Scenario
+    env_kwargs: dict
+    env: object
 
-    env_kwargs = dict(scenario.env_kwargs)
-    probe = gym.make(tether_gym.ENV_ID, **env_kwargs)
-    policy = make_policy(policy_name, probe, scenario, seed=seeds[0])
-    cfg = probe.unwrapped.config
-    probe.close()
-    venv = make_sb3_vec_env(len(seeds), seed=None, env_kwargs=env_kwargs)
-    venv.seed(seeds[0])
-    num = len(seeds)
-    infos = [[] for _ in range(num)]
-    rewards = [[] for _ in range(num)]
-    finished = [None] * num
-    nu0 = [None] * num
 
-    def callback(local_vars, _globals):
-        i = local_vars["i"]
-        info = local_vars["info"]
-        if finished[i] is not None:
-            return
-        if nu0[i] is None:
-            nu0[i] = info["nu"] - cfg.control_step
-        infos[i].append(info)
-        rewards[i].append(float(local_vars["reward"]))
-        if local_vars["done"]:
-            finished[i] = bool(info.get("TimeLimit.truncated", False))
+def _prepare(specs: list[PolicySpec], scenarios, env_kwargs: dict, seeds: list[int],
+             log) -> list[_Setting]:
+    """Build every scenario's env and check every policy run against it, before any run.
 
-    evaluate_policy(policy, venv, n_eval_episodes=num, deterministic=True, callback=callback,
-                    warn=False)
-    venv.close()
-    episodes = [episode_metrics(infos[i], rewards[i], nu0[i], cfg.control_step, finished[i])
-                for i in range(num)]
-    return episodes, (infos[0] if record else None)
+    Raises ValueError naming the scenario, the policy and what does not fit.
+    """
+    settings = []
+    for sc in scenarios:
+        kwargs = sc.env_kwargs_with(env_kwargs)
+        try:
+            env = gym.make(tether_gym.ENV_ID, **kwargs)
+        except (ValueError, TypeError) as exc:
+            given = f" with --env-kwargs {env_kwargs}" if env_kwargs else ""
+            raise ValueError(f"scenario {sc.name!r}{given}: {exc}") from None
+        settings.append(_Setting(sc, kwargs, env))
+    for spec in specs:
+        spec.load()
+    for st in settings:
+        obs, _ = st.env.reset(seed=seeds[0])
+        n_act = st.env.action_space.shape[0]
+        for spec in specs:
+            for run in range(spec.n_runs):
+                where = (f"policy {spec.name!r}"
+                         + (f" (run {spec.runs[run]})" if spec.runs[run] is not None else "")
+                         + f" on scenario {st.scenario.name!r}")
+                try:
+                    policy = spec.policies(run, st.env, st.scenario, seeds[:1])[0]
+                    action, _ = policy.predict(obs[None], deterministic=True)
+                except (ValueError, TypeError) as exc:
+                    raise ValueError(f"{where}: {exc}") from None
+                shape = np.shape(action)
+                if shape not in ((1, n_act), (n_act,)):
+                    raise ValueError(f"{where}: action of shape {shape} for an env with "
+                                     f"{n_act} reels (observation {obs.shape})")
+    return settings
 
 
 def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, seed: int = 0,
-             out: Path | None = None, plots: bool = True, log=print) -> dict:
-    """Evaluate ``policies`` on every scenario of ``suite``; return the results dict."""
+             out: Path | None = None, plots: bool = True, log=print,
+             env_kwargs: dict | None = None, torch_threads: int | None = 1,
+             command: str | None = None) -> dict:
+    """Evaluate ``policies`` on every scenario of ``suite``; return the results dict.
+
+    Parameters
+    ----------
+    policies : list of str
+        Baseline names, shipped agents' names or paths (see the module docstring).
+    suite : str
+        A built-in suite name or a YAML suite file (:mod:`tether_gym_agents.scenarios`).
+    n_seeds : int
+        Episodes per scenario and training run (1 ... MAX_SEEDS), seeds ``seed`` ...
+        ``seed + n_seeds - 1``.
+    seed : int
+        First env seed (>= 0).
+    out : Path or None
+        Folder for ``results.json`` and the plots (None: write nothing).
+    plots : bool
+        Write ``trajectories.png`` and ``metrics.png`` (needs matplotlib).
+    log : callable or None
+        Progress lines (``print`` by default).
+    env_kwargs : dict or None
+        Env arguments applied on top of every scenario.
+    torch_threads : int or None
+        ``torch.set_num_threads`` before trained agents run (None: leave torch alone).
+    command : str or None
+        The command line recorded in ``results.json``'s ``meta``.
+
+    Returns
+    -------
+    dict
+        The content of ``results.json`` (:func:`tether_gym_agents.results.build_results`).
+    """
+    from .results import build_results, write_results
+
+    log = log or (lambda *a, **k: None)
+    _check_count("n_seeds", n_seeds, 1, MAX_SEEDS)
+    _check_count("seed", seed, 0, MAX_SEED - n_seeds + 1)
+    env_kwargs = dict(env_kwargs or {})
     scenarios = get_suite(suite)
-    seeds = [seed + i for i in range(n_seeds)]
-    results = {"suite": suite, "seeds": seeds, "policies": {}, "scenarios": {},
-               "scenario_descriptions": {s.name: s.description for s in scenarios}}
-    trajectories = {}
-    for name in policies:
-        t0 = time.perf_counter()
-        all_eps = []
-        for sc in scenarios:
-            episodes, traj = _run_scenario(name, sc, seeds, record=(sc.name == scenarios[0].name))
-            all_eps.extend(episodes)
-            results["scenarios"].setdefault(sc.name, {})[name] = aggregate(episodes)
-            if traj is not None:
-                trajectories[name] = traj
-        agg = aggregate(all_eps)
-        agg["success_rate"] = agg["success"]
-        results["policies"][name] = agg
-        log(f"  evaluated {name:>10s} on {len(scenarios)} scenarios x {n_seeds} seeds "
-            f"in {time.perf_counter() - t0:.1f} s")
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
-        with open(out / "results.json", "w") as fh:
-            json.dump(results, fh, indent=2, default=float)
+        check_out_dir(Path(out), "out")
+    specs = [resolve_policy(p) for p in policies]
+    names = [s.name for s in specs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"policies {names} name one policy twice")
+    if any(s.kind is not PolicyKind.BASELINE for s in specs) and torch_threads is not None:
+        import torch
+
+        torch.set_num_threads(int(torch_threads))
+    seeds = [seed + i for i in range(n_seeds)]
+    t_start = time.perf_counter()
+    log(f"building {len(scenarios)} scenario env(s) and loading {len(specs)} policies (the "
+        "first run after an install compiles the env's numba kernels: about a minute) ...")
+    settings = _prepare(specs, scenarios, env_kwargs, seeds, log)
+    log(f"  checked {sum(s.n_runs for s in specs)} policy run(s) against "
+        f"{len(settings)} scenario(s) in {time.perf_counter() - t_start:.1f} s")
+    episodes: list[dict] = []
+    trajectories: dict[str, Trajectory] = {}
+    try:
+        for k, spec in enumerate(specs, 1):
+            t_policy = time.perf_counter()
+            for j, st in enumerate(settings, 1):
+                t0 = time.perf_counter()
+                for run in range(spec.n_runs):
+                    trajs = rollout(spec.policies(run, st.env, st.scenario, seeds), seeds,
+                                    st.env_kwargs)
+                    for s, traj in zip(seeds, trajs, strict=True):
+                        episodes.append({"policy": spec.name, "run": run,
+                                         "scenario": st.scenario.name, "seed": s,
+                                         **episode_metrics(traj)})
+                    if j == 1 and run == 0:
+                        trajectories[spec.name] = trajs[0]
+                log(f"  [{k}/{len(specs)}] {spec.name}: scenario {j}/{len(settings)} "
+                    f"{st.scenario.name}, {n_seeds} episodes x {spec.n_runs} run(s) in "
+                    f"{time.perf_counter() - t0:.1f} s")
+            log(f"  evaluated {spec.name} ({spec.kind.value}, {spec.n_runs} run(s)) on "
+                f"{len(settings)} scenarios x {n_seeds} seeds in "
+                f"{time.perf_counter() - t_policy:.1f} s")
+    finally:
+        for st in settings:
+            st.env.close()
+    results = build_results(specs, settings, seeds, episodes, env_kwargs=env_kwargs,
+                            suite=suite, command=command, torch_threads=torch_threads)
+    if out is not None:
+        write_results(results, Path(out) / "results.json")
         if plots:
-            _plots(results, trajectories, out, log)
+            from .eval_plots import plot_results
+
+            plot_results(results, trajectories, settings[0].scenario, Path(out), log)
     return results
 
 
-def _fmt(mean: float, half: float, n: int) -> str:
-    if not math.isfinite(mean):
-        return "n/a"
-    digits = 3 if abs(mean) >= 0.01 or mean == 0 else 2
-    fmt = f"{{:.{digits}g}}" if abs(mean) < 0.01 and mean != 0 else "{:.3f}"
-    text = fmt.format(mean)
-    if n > 1 and math.isfinite(half):
-        text += " +- " + fmt.format(half)
-    return text
+def _check_count(flag: str, value, low: int, high: int) -> None:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
+            low <= value <= high):
+        raise ValueError(f"{flag}={value!r} must be an integer in [{low}, {high}]")
 
 
-def markdown_table(results: dict) -> str:
-    """Overall table (policy x metric, mean +- 95 % CI) and a per-scenario breakdown."""
-    lines = ["| policy | " + " | ".join(title for _, title in TABLE_COLUMNS)
-             + " | failures slack/tumble/length |",
-             "|---" * (len(TABLE_COLUMNS) + 2) + "|"]
-    for name, agg in results["policies"].items():
-        cells = [_fmt(agg[k], agg[f"{k}_ci95"], agg[f"{k}_n"]) for k, _ in TABLE_COLUMNS]
-        counts = "/".join(str(round(agg[f] * agg[f"{f}_n"])) for f in FAILURES)
-        lines.append(f"| {name} | " + " | ".join(cells) + f" | {counts} |")
-    names = list(results["policies"])
-    lines += ["", "Per scenario: success rate / tracking RMS after orbit 1 [rad]", "",
-              "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
-    for sc, per in results["scenarios"].items():
-        cells = [f"{per[p]['success']:.2f} / " + (f"{per[p]['tracking_rms']:.2e}"
-                                                  if math.isfinite(per[p]["tracking_rms"])
-                                                  else "n/a") for p in names]
-        lines.append(f"| {sc} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+def check_out_dir(out: Path, flag: str = "--out") -> None:
+    """Create ``out`` and check that a file can be written there, before any work.
 
-
-def _plots(results: dict, trajectories: dict, out: Path, log) -> None:
+    Raises ValueError when ``out`` is a file, cannot be created or is not writable.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"{flag} {str(out)!r} is a file; give a folder for results.json "
+                         "and the plots")
     try:
-        from matplotlib.backends.backend_agg import FigureCanvasAgg
-        from matplotlib.figure import Figure
-    except ImportError:
-        log('  (plots skipped: matplotlib is missing; pip install "tether_gym[plot]")')
-        return
-    fig = Figure(figsize=(10, 6.5), layout="constrained")
-    FigureCanvasAgg(fig)
-    ax_err, ax_len = fig.subplots(2, 1, sharex=True)
-    for name, infos in trajectories.items():
-        nu = np.array([i["nu"] for i in infos]) / (2 * np.pi)
-        err = np.array([np.abs(i["theta"] - i["theta_ref"]).max() for i in infos])
-        total = np.array([i["length"].sum() for i in infos])
-        ax_err.semilogy(nu, np.maximum(err, 1e-7), label=name)
-        ax_len.plot(nu, total, label=name)
-    ax_err.set_ylabel("max |theta - theta_d| [rad]")
-    ax_err.set_title("paper case (Sec. 4.3), seed 0")
-    ax_err.legend(ncol=3, fontsize=8)
-    ax_len.set_ylabel("l1 + ... + l_n [-]")
-    ax_len.set_xlabel("true anomaly [orbits]")
-    fig.savefig(out / "trajectories.png", dpi=100)
-    fig = Figure(figsize=(12, 6), layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(2, 4).ravel()
-    names = list(results["policies"])
-    for ax, (key, title) in zip(axes, TABLE_COLUMNS, strict=True):
-        means = [results["policies"][p][key] for p in names]
-        halves = [results["policies"][p][f"{key}_ci95"] for p in names]
-        ax.bar(range(len(names)), np.nan_to_num(means), yerr=np.nan_to_num(halves), capsize=3)
-        ax.set_xticks(range(len(names)), names, rotation=45, fontsize=8)
-        ax.set_title(title, fontsize=9)
-        if key in ("tracking_rms", "final_error", "chattering") and max(np.nan_to_num(means)) > 0:
-            ax.set_yscale("log")
-    fig.savefig(out / "metrics.png", dpi=100)
-    log(f"  wrote {out / 'trajectories.png'} and {out / 'metrics.png'}")
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out, prefix=".write_test_"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"{flag} {str(out)!r} is not a writable folder: "
+                         f"{exc.strerror or exc}") from None
+
+
+def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    parser.add_argument("policies", nargs="*",
+                        help="smc, zero, periodic, random, shipped agents (ppo, sac, ...) or "
+                             "paths to trained agents (run folder, model file, or a folder "
+                             "of seed_K run folders = one policy with several runs); default: "
+                             "all baselines and shipped agents")
+    parser.add_argument("--suite", default="default",
+                        help="scenario suite: a name below or a YAML suite file (default: "
+                             "default)")
+    parser.add_argument("--env-kwargs", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="env arguments applied on top of every scenario, as Python "
+                             "literals, e.g. n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
+    parser.add_argument("--seeds", type=int, default=10,
+                        help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
+    parser.add_argument("--out", type=Path, default=Path("runs/eval"),
+                        help="folder for results.json and plots (default runs/eval)")
+    parser.add_argument("--torch-threads", type=int, default=1,
+                        help="torch threads for trained agents (default 1; results do not "
+                             "depend on it)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the plots")
+    return parser
+
+
+def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
+    import textwrap
+
+    from .paper.cli import add_arguments as add_paper_arguments
+
+    notes = (
+        "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
+        "description: ..., env_kwargs: {...}, nominal: {masses: [...], eccentricity: ...}}]'.",
+        "The table reports, per policy, the interquartile mean over training runs x "
+        "scenarios of each run's mean over its episodes, with a 95 % stratified-bootstrap "
+        "interval (2 runs or more) and the probability of improvement over smc.",
+        "Reproduce the paper instead: evaluate.py paper --out DIR (alias: evaluate.py "
+        "--paper --out DIR).")
+    epilog = "\n\n".join([describe_suites(), *(textwrap.fill(n, 79) for n in notes)])
+    top = argparse.ArgumentParser(
+        prog="evaluate.py", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Benchmark policies on tether_gym scenario suites (evaluate.py [bench] "
+                    "...), or reproduce the paper's figures (evaluate.py paper ...).",
+        epilog=epilog)
+    sub = top.add_subparsers(dest="command", metavar="{bench,paper}")
+    bench = sub.add_parser("bench", help="benchmark policies (the default command)",
+                           prog="evaluate.py [bench]", epilog=epilog,
+                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                           description="Benchmark policies on a tether_gym scenario suite.")
+    _bench_parser(bench)
+    paper = sub.add_parser("paper", help="reproduce Shi, Zhu & Zhu (2019), Figs. 2-9",
+                           prog="evaluate.py paper",
+                           description="Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from "
+                                       "tether_gym and write paper_vs_tether_gym.md/.json "
+                                       "beside the PNG figures.")
+    add_paper_arguments(paper)
+    return top, bench
 
 
 def main(argv=None) -> int:
-    """Command line of ``evaluate.py``; returns the exit code."""
-    argv = list(sys.argv[1:] if argv is None else argv)
+    """Command line of ``evaluate.py``; returns the exit code.
+
+    ``evaluate.py [bench] [policies] [options]`` benchmarks (the default command),
+    ``evaluate.py paper --out DIR`` reproduces the paper; ``--paper`` anywhere is an
+    alias of the ``paper`` command.
+    """
+    argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
+    command = shlex.join(["evaluate.py", *argv])
     if "--paper" in argv:
-        from .paper import main as paper_main
+        argv = ["paper"] + [a for a in argv if a != "--paper"]
+    elif not argv or argv[0] not in ("bench", "paper"):
+        argv = ["bench", *argv]
+    top, _ = _build_parser()
+    args = top.parse_args(argv)
+    if args.command == "paper":
+        from .paper.cli import run as paper_run
 
-        argv.remove("--paper")
-        return paper_main(argv)
-    from .trained import pretrained_agents
-
-    parser = argparse.ArgumentParser(
-        prog="evaluate.py",
-        description="Benchmark policies on a tether_gym scenario suite (or --paper to "
-                    "reproduce the paper's figures).")
-    parser.add_argument("policies", nargs="*",
-                        help="smc, zero, periodic, random, ppo, sac (shipped agents) or paths "
-                             "to trained agents; default: all baselines and shipped agents")
-    parser.add_argument("--suite", default="default", help="scenario suite (default: default)")
-    parser.add_argument("--seeds", type=int, default=10, help="seeds per scenario (default 10)")
-    parser.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
-    parser.add_argument("--out", type=Path, default=Path("runs/eval"),
-                        help="folder for results.json and plots (default runs/eval)")
-    parser.add_argument("--no-plots", action="store_true", help="skip the plots")
-    args = parser.parse_args(argv)
-    if args.seeds < 1:
-        parser.error(f"--seeds must be >= 1, got {args.seeds}")
-    policies = args.policies or list(BASELINES) + sorted(pretrained_agents())
+        return paper_run(args)
     try:
+        env_kwargs = parse_env_kwargs(args.env_kwargs)
+        _check_count("--seeds", args.seeds, 1, MAX_SEEDS)
+        _check_count("--seed", args.seed, 0, MAX_SEED - args.seeds + 1)
+        _check_count("--torch-threads", args.torch_threads, 1, 256)
         get_suite(args.suite)
+        policies = args.policies or list(BASELINES) + list(shipped_agents())
+        for name in policies:
+            resolve_policy(name)
+        check_out_dir(args.out)
         t0 = time.perf_counter()
         print(f"tether_gym {tether_gym.__version__}: {len(policies)} policies on suite "
-              f"{args.suite!r}, {args.seeds} seeds per scenario")
+              f"{args.suite!r}, {args.seeds} seeds per scenario and run, torch threads "
+              f"{args.torch_threads}" + (f", env kwargs {env_kwargs}" if env_kwargs else ""))
         results = evaluate(policies, args.suite, args.seeds, args.seed, args.out,
-                           plots=not args.no_plots)
+                           plots=not args.no_plots, env_kwargs=env_kwargs,
+                           torch_threads=args.torch_threads, command=command)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2
+    from .results import markdown_tables
+
     print()
-    print(markdown_table(results))
+    print(markdown_tables(results))
     print(f"\nresults: {args.out / 'results.json'} ({time.perf_counter() - t0:.0f} s)")
     return 0

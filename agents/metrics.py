@@ -1,7 +1,8 @@
-"""Per-episode metrics of a libration-tracking rollout, and their aggregation.
+"""Per-episode metrics of a libration-tracking rollout: the one definition of each.
 
-An episode is recorded as the env's ``info`` dicts after every step. Definitions
-(n tethers, steps k, true anomaly nu_k, one orbit = 2 pi rad):
+An episode is a :class:`~tether_gym_agents.rollout.Trajectory` (row 0: the reset state;
+rows 1..K: after every control step). Definitions (n tethers, steps k = 1..K, true
+anomaly nu_k counted from the reset, one orbit = 2 pi rad), on the step rows:
 
 * ``tracking_rms`` [rad]: RMS of theta_i - theta_d over all tethers and the steps
   after the first orbit (NaN if the episode ended before it).
@@ -15,6 +16,11 @@ An episode is recorded as the env's ``info`` dicts after every step. Definitions
 * ``slack``, ``tumble``, ``length``: 1 if the episode ended for that reason.
 * ``success``: 1 if it ran to the time limit without failure.
 * ``chattering`` [-]: total variation of the reel rates, sum_k sum_i |l_i'(k) - l_i'(k-1)|.
+* ``return`` [-]: sum of the rewards.
+
+The benchmark (:mod:`tether_gym_agents.evaluation`) and the paper reproduction
+(:mod:`tether_gym_agents.paper`) both compute these from the same trajectories;
+statistics over episodes and training runs are in :mod:`tether_gym_agents.stats`.
 """
 
 from __future__ import annotations
@@ -22,14 +28,19 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy import stats
 
-__all__ = ["episode_metrics", "aggregate", "convergence_orbits", "METRICS", "CONVERGENCE_TOL"]
+__all__ = ["episode_metrics", "convergence_orbits", "after_first_orbit", "METRICS",
+           "HIGHER_IS_BETTER", "FAILURES", "CONVERGENCE_TOL"]
 
 CONVERGENCE_TOL = 1e-3
 """Tracking tolerance of the convergence time [rad]."""
 METRICS = ("tracking_rms", "final_error", "converge_orbits", "reel_effort", "reel_excursion",
            "min_tension", "slack", "tumble", "length", "success", "chattering", "return")
+"""Every metric of :func:`episode_metrics`, in table order."""
+HIGHER_IS_BETTER = frozenset({"success", "min_tension", "return"})
+"""Metrics where a larger value is better; for all others smaller is better."""
+FAILURES = ("slack", "tumble", "length")
+"""Failure metrics (1 when the episode ended for that reason)."""
 
 
 def convergence_orbits(orbits: np.ndarray, error: np.ndarray,
@@ -47,19 +58,35 @@ def convergence_orbits(orbits: np.ndarray, error: np.ndarray,
     return float(orbits[above[-1] + 1])
 
 
-def episode_metrics(infos: list[dict], rewards: list[float], nu0: float, control_step: float,
-                    truncated: bool) -> dict:
-    """Metrics of one episode from its per-step infos (see the module docstring)."""
-    nu = np.array([i["nu"] for i in infos]) - nu0
-    theta = np.array([i["theta"] for i in infos])
-    ref = np.array([i["theta_ref"] for i in infos])
-    err = theta - ref[:, None]
-    dl = np.array([i["dlength"] for i in infos])
-    length = np.array([i["length"] for i in infos])
-    tmin = np.array([i["tension_min"] for i in infos])
-    failure = infos[-1]["failure"]
+def after_first_orbit(traj) -> np.ndarray:
+    """Mask of the step rows (1..K) of ``traj`` that lie after the first orbit.
+
+    The step after which nu - nu(0) > 2 pi (+ 1e-9 rad); used by ``tracking_rms`` here
+    and by the paper table's "after orbit 1" numbers.
+    """
+    return traj.nu[1:] - traj.nu[0] > 2.0 * math.pi + 1e-9
+
+
+def episode_metrics(traj) -> dict:
+    """Metrics of one episode (see the module docstring).
+
+    Parameters
+    ----------
+    traj : Trajectory
+        The recorded episode (:func:`tether_gym_agents.rollout.rollout`).
+
+    Returns
+    -------
+    dict
+        ``{metric: float}`` for every name in :data:`METRICS`; NaN where undefined.
+    """
     orbit = 2.0 * math.pi
-    after = nu > orbit + 1e-9
+    nu = traj.nu[1:] - traj.nu[0]
+    err = traj.theta[1:] - traj.theta_ref[1:, None]
+    dl = traj.dlength[1:]
+    length = traj.length[1:]
+    failure = traj.failure
+    after = after_first_orbit(traj)
     maxerr = np.abs(err).max(axis=1)
     last = nu > nu[-1] - orbit
     converge = None if failure is not None else convergence_orbits(nu / orbit, maxerr)
@@ -67,33 +94,13 @@ def episode_metrics(infos: list[dict], rewards: list[float], nu0: float, control
         "tracking_rms": float(np.sqrt(np.mean(err[after] ** 2))) if after.any() else math.nan,
         "final_error": float(maxerr[last].max()),
         "converge_orbits": math.nan if converge is None else converge,
-        "reel_effort": float(np.abs(dl).sum() * control_step),
+        "reel_effort": float(np.abs(dl).sum() * traj.settings["control_step"]),
         "reel_excursion": float((length.max(axis=0) - length.min(axis=0)).max()),
-        "min_tension": float(tmin.min()),
+        "min_tension": float(traj.tension_min[1:].min()),
         "slack": float(failure == "slack"),
         "tumble": float(failure == "tumble"),
         "length": float(failure == "length"),
-        "success": float(failure is None and truncated),
+        "success": float(failure is None and traj.truncated),
         "chattering": float(np.abs(np.diff(dl, axis=0)).sum()),
-        "return": float(np.sum(rewards)),
+        "return": float(np.sum(traj.reward)),
     }
-
-
-def aggregate(episodes: list[dict]) -> dict:
-    """Mean and 95 % confidence half-width (Student t) of each metric over episodes.
-
-    NaN entries (a metric undefined for an episode) are left out of that metric;
-    ``<metric>_n`` counts the episodes used.
-    """
-    out = {}
-    for key in METRICS:
-        values = np.array([e[key] for e in episodes], dtype=float)
-        values = values[np.isfinite(values)]
-        n = values.size
-        mean = float(values.mean()) if n else math.nan
-        half = (float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / math.sqrt(n))
-                if n > 1 else (0.0 if n == 1 else math.nan))
-        out[key] = mean
-        out[f"{key}_ci95"] = half
-        out[f"{key}_n"] = n
-    return out

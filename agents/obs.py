@@ -95,6 +95,11 @@ class ObservationLayout:
         """Commanded l' [-] -> action in [-1, 1] (float32), clipped."""
         return np.clip(np.asarray(reel_rate) / self.max_reel_rate, -1.0, 1.0).astype(np.float32)
 
+    def to_reel_rate(self, action: np.ndarray) -> np.ndarray:
+        """Action -> commanded l' [-] (float64), as the env applies it: clipped to [-1, 1]
+        and scaled by ``max_reel_rate`` (the inverse of :meth:`to_action` inside the box)."""
+        return np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.max_reel_rate
+
 
 class ReelRatePolicy:
     """Base of the model-based baselines: a reel-rate law behind SB3's ``predict``.

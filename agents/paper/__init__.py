@@ -1,10 +1,10 @@
 """Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from the environment and the baselines.
 
-``python evaluate.py --paper --out DIR`` (or :func:`main`) runs every study of the
+``python evaluate.py paper --out DIR`` (or :func:`main`) runs every study of the
 paper through ``gym.make("tether_gym/TetherLibration-v0", ...)`` with the policies of
 this package, writes the figures as PNG files into DIR and a table
 ``paper_vs_tether_gym.md`` (+ ``.json``) that puts every number the paper states
-beside ours, with a verdict. Where NOTES.md (shared/paper/NOTES.md) explains a
+beside ours, with a verdict. Where docs/model.md explains a
 difference, the table checks that explanation with its own run.
 
 Studies and settings
@@ -35,7 +35,7 @@ the model's tension along the exact reference (no env) to separate the two effec
 
 Definitions used in the table
 -----------------------------
-* swing of a tether = (max l - min l) / l(0) over one orbit (NOTES.md's measure;
+* swing of a tether = (max l - min l) / l(0) over one orbit (docs/model.md's measure;
   "peak reel-out" = max l / l(0) - 1 is reported beside it);
 * convergence time [orbits] = the first nu after which max_i |theta_i - theta_d|
   stays below 1e-3 rad to the end of the run;
@@ -45,9 +45,9 @@ Definitions used in the table
   per orbit (see :func:`chattering`).
 """
 
+from ..rollout import Trajectory, rollout
 from .cli import main, reproduce
 from .measures import chattering, convergence_orbits, swing
-from .runs import Trajectory, rollout
 from .settings import DEFAULT_SMC_SETTINGS, OPEN_LOOP_SETTINGS, PAPER_SMC_SETTINGS
 
 __all__ = [

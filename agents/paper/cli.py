@@ -16,6 +16,7 @@ from tether_gym.tasks.reference import (
     periodic_reel_rate,
 )
 
+from ..results import to_jsonable
 from .figures import _draw, _figure_class
 from .measures import smc_metrics, swing
 from .runs import make_env, run_periodic, run_smc
@@ -29,7 +30,7 @@ from .settings import (
     TABLE1_LENGTH,
 )
 from .studies import _positivity_study, _swing_scan, _zero_state_study
-from .table import _build_rows, _jsonable, _markdown
+from .table import _build_rows, _markdown
 
 
 def reproduce(out_dir, orbits: float | None = None, quick: bool = False, log=print) -> dict:
@@ -132,7 +133,7 @@ def reproduce(out_dir, orbits: float | None = None, quick: bool = False, log=pri
     res["smc_paper"]["settings"] = figs["smc_paper"].settings
     res["smc_default"]["settings"] = figs["smc_default"].settings
 
-    log("L0 sweep (NOTES.md) ...")
+    log("L0 sweep (docs/model.md) ...")
     res["l0_sweep"] = []
     for l0_km, notes_bound in ((1.0, "15.5"), (10.0, "1.55"), (20.0, "0.78"), (30.0, "—")):
         traj = run_smc(dur(3.0), DEFAULT_SMC_SETTINGS, total_tether_length=l0_km * 1e3)
@@ -153,7 +154,8 @@ def reproduce(out_dir, orbits: float | None = None, quick: bool = False, log=pri
     rows = _build_rows(res)
     res["table"] = rows
     (out / "paper_vs_tether_gym.md").write_text(_markdown(res, rows))
-    (out / "paper_vs_tether_gym.json").write_text(json.dumps(_jsonable(res), indent=1))
+    (out / "paper_vs_tether_gym.json").write_text(json.dumps(to_jsonable(res), indent=1,
+                                                             allow_nan=False))
     res["files"] = res["figures"] + ["paper_vs_tether_gym.md", "paper_vs_tether_gym.json"]
     log(f"wrote {len(res['files'])} files to {out} in {res['runtime_s']:.1f} s")
     return res
@@ -169,20 +171,30 @@ def _positive(text: str) -> float:
     return value
 
 
-def main(argv=None) -> int:
-    """``evaluate.py --paper``: reproduce the paper's figures and table into --out."""
-    parser = argparse.ArgumentParser(
-        prog="evaluate.py --paper",
-        description="Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from tether_gym and write "
-                    "paper_vs_tether_gym.md/.json beside the PNG figures.")
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """The options of ``evaluate.py paper`` (shared by :func:`main`)."""
     parser.add_argument("--out", required=True, help="output directory")
     parser.add_argument("--orbits", type=_positive, default=None,
                         help="cap every run at this many orbits (for quick checks)")
     parser.add_argument("--quick", action="store_true",
                         help="coarse A scans and a small positivity grid")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the reproduction for parsed arguments; returns the exit code."""
     reproduce(args.out, orbits=args.orbits, quick=args.quick)
     return 0
+
+
+def main(argv=None) -> int:
+    """``evaluate.py paper``: reproduce the paper's figures and table into --out."""
+    parser = argparse.ArgumentParser(
+        prog="evaluate.py paper",
+        description="Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from tether_gym and write "
+                    "paper_vs_tether_gym.md/.json beside the PNG figures.")
+    add_arguments(parser)
+    return run(parser.parse_args(argv))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -67,7 +67,7 @@ def _draw(figures: dict, out_dir: Path) -> list:
     for j, coef in enumerate((3.0, 2.4)):
         ax.plot(zero.orbits, zero.tension[:, j], label=f"T^_{labels[j]} (env)")
         ax.plot(zero.orbits, coef / k**2, "k:", lw=1.0,
-                label="3 / k^2, 2.4 / k^2 (NOTES.md)" if j == 0 else None)
+                label="3 / k^2, 2.4 / k^2 (docs/model.md)" if j == 0 else None)
     ax.set_ylim(top=1.15 * float(zero.tension.max()))
     ax.legend(fontsize=8, ncol=3, loc="upper center")
     _save(fig, out_dir, "fig4_zero_state_tensions.png", written)

@@ -1,100 +1,60 @@
-"""Paper reproduction: rollouts."""
+"""Paper reproduction: rollouts, through the benchmark's rollout path.
+
+Every study runs one episode of a baseline with :func:`tether_gym_agents.rollout.rollout`
+on a one-env native vector env whose only time limit is the configured number of orbits
+(``max_episode_steps=-1``), and keeps the whole :class:`~tether_gym_agents.rollout.Trajectory`.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-
 import gymnasium as gym
-import numpy as np
 
 import tether_gym
 
 from ..open_loop import PeriodicReel, ZeroStateReel
+from ..rollout import Trajectory, make_vector_env, rollout
 from ..smc import SlidingModeController
-from .settings import OPEN_LOOP_SETTINGS, ORBIT
+from .settings import OPEN_LOOP_SETTINGS
 
-
-@dataclass
-class Trajectory:
-    """One episode: the reset state (row 0) and the state after every control step.
-
-    Arrays have one row per sample (K + 1 rows for K steps), except ``command``
-    (K rows: the commanded reel rate l'_cmd [-] held over step k, after clipping).
-    ``tension`` is T^ at the sample, ``tension_min`` the smallest T^ at the physics
-    substep boundaries of the step that ended there.
-    """
-
-    nu: np.ndarray
-    theta: np.ndarray
-    dtheta: np.ndarray
-    length: np.ndarray
-    dlength: np.ndarray
-    tension: np.ndarray
-    tension_min: np.ndarray
-    theta_ref: np.ndarray
-    reel_accel: np.ndarray
-    command: np.ndarray
-    failure: str | None
-    settings: dict = field(default_factory=dict)
-
-    @property
-    def orbits(self) -> np.ndarray:
-        """nu / 2 pi [orbits] of each sample (from the start of the episode)."""
-        return (self.nu - self.nu[0]) / ORBIT
-
-    @property
-    def tracking_error(self) -> np.ndarray:
-        """max_i |theta_i - theta_d| [rad] per sample."""
-        return np.abs(self.theta - self.theta_ref[:, None]).max(axis=1)
-
-    @property
-    def duration(self) -> float:
-        """Orbits actually simulated."""
-        return float(self.orbits[-1])
+__all__ = ["Trajectory", "make_env", "run_episode", "run_zero_state", "run_periodic",
+           "run_smc"]
 
 
 def make_env(orbits: float, **kwargs):
-    """The registered env with its own time limit only (``max_episode_steps=-1``)."""
+    """The registered single env with its own time limit only (``max_episode_steps=-1``)."""
     return gym.make(tether_gym.ENV_ID, max_episode_steps=-1, orbits_per_episode=orbits,
                     **kwargs)
 
 
-def rollout(env, policy, options: dict | None = None, seed: int = 0) -> Trajectory:
-    """Run one episode of ``policy`` (``predict`` interface) and record it."""
-    obs, info = env.reset(seed=seed, options=options)
-    cfg = env.unwrapped.config
-    infos = [info]
-    commands = []
-    while True:
-        action, _ = policy.predict(obs, deterministic=True)
-        commands.append(np.clip(np.asarray(action, dtype=float), -1.0, 1.0) * cfg.max_reel_rate)
-        obs, _, terminated, truncated, info = env.step(action)
-        infos.append(info)
-        if terminated or truncated:
-            break
+def run_episode(policy_for_env, orbits: float, options: dict | None = None, seed: int = 0,
+                **env_kwargs) -> Trajectory:
+    """One episode of ``policy_for_env(env)`` over ``orbits`` orbits.
 
-    def stack(key):
-        return np.array([i[key] for i in infos], dtype=float)
-
-    return Trajectory(stack("nu"), stack("theta"), stack("dtheta"), stack("length"),
-                      stack("dlength"), stack("tension"), stack("tension_min"),
-                      stack("theta_ref"), stack("reel_accel"), np.array(commands),
-                      infos[-1]["failure"],
-                      {"control_step": cfg.control_step, "physics_step": cfg.physics_step,
-                       "reel_time_constant": cfg.reel_time_constant,
-                       "accel_limit": cfg.accel_limit, "eccentricity": cfg.eccentricity,
-                       "amplitude": cfg.amplitude, "max_reel_rate": cfg.max_reel_rate,
-                       "total_tether_length": cfg.total_tether_length})
+    Parameters
+    ----------
+    policy_for_env : callable
+        Builds the policy for the env (e.g. ``SlidingModeController.for_env``).
+    orbits : float
+        Episode length [orbits].
+    options : dict or None
+        Reset options (initial state).
+    seed : int
+        Env seed.
+    **env_kwargs
+        Further env arguments.
+    """
+    venv = make_vector_env(1, dict(env_kwargs, orbits_per_episode=orbits))
+    try:
+        return rollout(policy_for_env(venv), [seed], options=options, env=venv)[0]
+    finally:
+        venv.close()
 
 
 def run_zero_state(orbits: float) -> Trajectory:
     """Eq. 7 from theta = theta' = 0 (Figs. 2-4)."""
-    env = make_env(orbits, amplitude=0.0, initial_theta=(0.0, 0.0), **OPEN_LOOP_SETTINGS)
-    try:
-        return rollout(env, ZeroStateReel.for_env(env),
-                       {"theta": [0.0, 0.0], "dtheta": [0.0, 0.0]})
-    finally:
-        env.close()
+    return run_episode(ZeroStateReel.for_env, orbits,
+                       {"theta": [0.0, 0.0], "dtheta": [0.0, 0.0]},
+                       amplitude=0.0, initial_theta=(0.0, 0.0), **OPEN_LOOP_SETTINGS)
 
 
 def run_periodic(eccentricity: float, amplitude: float, orbits: float,
@@ -104,18 +64,10 @@ def run_periodic(eccentricity: float, amplitude: float, orbits: float,
                   initial_theta=(0.0, 0.0))
     if semi_latus_rectum is not None:
         kwargs["semi_latus_rectum"] = semi_latus_rectum
-    env = make_env(orbits, **kwargs)
-    try:
-        return rollout(env, PeriodicReel.for_env(env),
-                       {"theta": [0.0, 0.0], "dtheta": [amplitude, amplitude]})
-    finally:
-        env.close()
+    return run_episode(PeriodicReel.for_env, orbits,
+                       {"theta": [0.0, 0.0], "dtheta": [amplitude, amplitude]}, **kwargs)
 
 
 def run_smc(orbits: float, settings: dict, **env_kwargs) -> Trajectory:
     """Sliding mode (c = k = 1, eps = 0.1) from the Sec. 4.3 state, accel limit on."""
-    env = make_env(orbits, **settings, **env_kwargs)
-    try:
-        return rollout(env, SlidingModeController.for_env(env))
-    finally:
-        env.close()
+    return run_episode(SlidingModeController.for_env, orbits, **settings, **env_kwargs)

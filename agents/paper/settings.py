@@ -23,4 +23,4 @@ TABLE1_LENGTH = 0.5
 FIG5_AMPLITUDES = (0.1, 0.2, 0.3)
 FIG6_AMPLITUDES = (0.5, 0.6, 0.7, 0.8, 0.9)
 FIG6_ECCENTRICITY = 0.7
-PLOT_EXTRA = 'pip install "tether_gym[plot]"'
+PLOT_EXTRA = 'pip install "matplotlib>=3.7"'

@@ -5,8 +5,6 @@ from __future__ import annotations
 import itertools
 import math
 
-import numpy as np
-
 from tether_gym.envs.config import EnvConfig
 
 _ENV = EnvConfig()
@@ -62,7 +60,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                           "0.0055 rad); bound derived in tests/agents/test_open_loop.py"))
     rows.append(_row("Zero state: peak l_i", "0.75 at 0.5 orbit", _fmt(z["peak_length"], 4),
                      verdict=SHORT if half else _verdict(z["peak_length"], 0.75, 2e-3, 1e-2),
-                     note="closed form l0 (1+e)/(1+e cos nu) = 0.75 (NOTES.md Eq. 7)"))
+                     note="closed form l0 (1+e)/(1+e cos nu) = 0.75 (docs/model.md Eq. 7)"))
     rows.append(_row("Zero state: nu of the peak [rad]", "pi = 3.1416 (0.5 orbit)",
                      _fmt(z["peak_nu"], 5),
                      verdict=SHORT if half else _verdict(z["peak_nu"], math.pi, 2e-2, 5e-2),
@@ -79,7 +77,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
         dev_env = z["tension_closed_form_max_rel_dev_env"]
         rows.append(_row(
             f"Zero state: {name} range over the run",
-            f"periodic (Fig. 4); NOTES.md closed form {'3' if j == 0 else '2.4'}/k^2 in "
+            f"periodic (Fig. 4); docs/model.md closed form {'3' if j == 0 else '2.4'}/k^2 in "
             f"{_fmt(cf, 4)}",
             f"{_fmt(z['tension_range_paper_procedure'][j], 4)} (paper's backward-difference "
             f"l''); env step-end sample {_fmt(z['tension_range_env'][j], 4)}",
@@ -96,7 +94,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             f"Fig. 5: swing (max-min)/l0 over one orbit, e = 0.2, A = {a:g}",
             f"{paper_pct} %", f"{_pct(m['swing'])} (peak reel-out {_pct(m['peak_out'])})",
             verdict=SHORT if whole else _verdict(100 * m["swing"], paper_pct, 0.5, 3.0),
-            note=f"NOTES.md: about {notes_pct} %; Eq. 11a gives {_pct(m['eq11a_swing'])}"
+            note=f"docs/model.md: about {notes_pct} %; Eq. 11a gives {_pct(m['eq11a_swing'])}"
                  + ("; the paper's '0.01 ... 2 %' matches half the peak-to-peak in l "
                     f"({_fmt(m['half_swing_abs'], 2)}), not the 24 % / 18 % measure"
                     if a == 0.2 else "")))
@@ -107,7 +105,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             f"A = e = {paper_a:g} (Eq. 11b)",
             f"{scan['argmin']:.3f} (Eq. 11a closed form: {scan['eq11a_argmin']:.3f})",
             verdict=SHORT if whole else _verdict(scan["argmin"], paper_a, 2e-3, 1e-2),
-            note=f"NOTES.md: ~{notes_a}: Eq. 11b's A = e is not the minimiser, and the "
+            note=f"docs/model.md: ~{notes_a}: Eq. 11b's A = e is not the minimiser, and the "
                  f"gap grows with e; {scan['evaluations']} runs"))
     f6 = res["fig6"]
     a_min = min(f6, key=lambda k: f6[k]["swing_abs_quadrature"])
@@ -122,7 +120,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             + (f"; env slack at {m['duration_orbits']:.2f} orbit" if m["failure"] else ""),
             verdict=SHORT if whole else _verdict(m["swing_abs_quadrature"], paper_val,
                                                  0.01, 0.05),
-            note="NOTES.md: the Fig. 6 magnitudes are not reproduced. Full-orbit values from "
+            note="docs/model.md: the Fig. 6 magnitudes are not reproduced. Full-orbit values from "
                  "the Eq. 10 quadrature (the env runs agree to "
                  f"{_fmt(max(v['env_vs_quadrature_max_dev'] for v in f6.values()), 2)} "
                  "in l until they end)"))
@@ -149,7 +147,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             f"(e={c['e']:g}, A={c['A']:g}: P={c['polynomial']:.3f}, model min "
             f"T^={c['model_min_tension']:.3f})" for c in env_bad) or "none")
         + ". Near the boundary min T^ changes by ~3.5 per unit A, so the env reel's "
-          "tension dips (module docstring) move the boundary by ~0.02; NOTES.md: the "
+          "tension dips (module docstring) move the boundary by ~0.02; docs/model.md: the "
           "polynomial is the last tether's tension at apogee only"))
     for r in pos["roots"]:
         model_gap = (None if r["model_root"] is None
@@ -166,7 +164,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             note=("model: polynomial too permissive by " + _fmt(-model_gap, 2)
                   if model_gap is not None and model_gap < -2e-3 else
                   "model: polynomial boundary exact (apogee is the minimum)")
-            + "; NOTES.md: agrees up to e = 0.5, slightly too permissive at 0.7"))
+            + "; docs/model.md: agrees up to e = 0.5, slightly too permissive at 0.7"))
     sp, sd = res["smc_paper"], res["smc_default"]
 
     def both(key, fmt=_fmt):
@@ -194,7 +192,8 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                  abs(sd["mean_total_length_after_orbit_1"] - 0.9)))
     rows.append(_row("SMC: mean l_1 + l_2 after orbit 1", "about 0.9", s1, s2,
                      verdict=_verdict(worst, 0.0, 0.02, 0.05),
-                     note="set by L0 through the accel limit (NOTES.md: 20 km); see the L0 rows"))
+                     note="set by L0 through the accel limit (docs/model.md: 20 km); see the "
+                          "L0 rows"))
     t1, t2 = both("min_tension")
     rows.append(_row("SMC: min T^ over the run", "> 0 (Fig. 9)", t1, t2,
                      verdict="reproduced" if min(sp["min_tension"], sd["min_tension"]) > 0
@@ -214,7 +213,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                      verdict=(SHORT if ch_p is None or ch_d is None else
                               "not reproduced" if all(smooth) else "reproduced"),
                      note=("no chattering: with the boundary layer and exact f, B the "
-                           "converged control is smooth (NOTES.md)" if all(smooth) else
+                           "converged control is smooth (docs/model.md)" if all(smooth) else
                            "high-frequency content found")))
     sat1, sat2 = both("saturated_command_steps", str)
     rows.append(_row("SMC: steps with the command at the env's rate cap (abs(action) = 1)",
@@ -227,7 +226,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                      "; ".join(f"{k}: {_fmt(v)}" for k, v in d1.items()) or "n/a",
                      "; ".join(f"{k}: {_fmt(v)}" for k, v in d2.items()) or "n/a",
                      verdict="—", note="the split l_1 : l_2 is internal dynamics the law "
-                                       "leaves free (NOTES.md); it moves from 0.5 : 0.5 to "
+                                       "leaves free (docs/model.md); it moves from 0.5 : 0.5 to "
                                        "about 0.28 : 0.61 during the transient"))
     a1, a2 = both("max_reel_accel_over_limit")
     rows.append(_row("SMC: max abs(L_ddot) / 0.01 m/s^2", "<= 1 (Sec. 4.3 limit)", a1, a2,
@@ -240,12 +239,12 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
         rows.append(_row(
             f"L0 = {row['L0_km']:g} km: accel bound a_max/(L0 n^2); SMC mean l_1 + l_2 "
             "after orbit 1",
-            f"L0 not given; NOTES.md bound {row['notes_bound']}", "—",
+            f"L0 not given; docs/model.md bound {row['notes_bound']}", "—",
             f"{row['accel_bound']:.3g}; {_fmt(row['mean_total_length'], 4)} "
             f"(min l {_fmt(row['min_length'])}, {fail})",
             verdict="—",
-            note="checks NOTES.md's L0 ~ 20 km; the sum falls as L0 grows: " + trend + (
-                "; slack in the first steps (NOTES.md: a reel that can follow the command "
+            note="checks docs/model.md's L0 ~ 20 km; the sum falls as L0 grows: " + trend + (
+                "; slack in the first steps (docs/model.md: a reel that can follow the command "
                 "gives a brief negative tension at the start)" if row["failure"] == "slack"
                 else "")))
     return rows
@@ -258,7 +257,7 @@ def _markdown(res: dict, rows: list) -> str:
         f"Generated by `tether_gym_agents.paper` in {res['runtime_s']:.1f} s "
         f"({'quick' if res['quick'] else 'full'} mode"
         + (f", runs shortened to {res['orbits']:g} orbits" if res["orbits"] is not None else "")
-        + "). NOTES.md = shared/paper/NOTES.md.",
+        + "). docs/model.md: the model notes of this repository.",
         "",
         "Column 'tether_gym': open-loop studies at control step = RK4 step = 0.001 rad, "
         "reel lag 0.005 rad, no acceleration or rate limit; sliding mode at the paper's step "
@@ -280,17 +279,3 @@ def _markdown(res: dict, rows: list) -> str:
         lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     lines += ["", "Figures: " + ", ".join(f"`{f}`" for f in res["figures"]), ""]
     return "\n".join(lines)
-
-
-def _jsonable(x):
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, (np.floating, float)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    return x

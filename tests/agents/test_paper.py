@@ -9,7 +9,7 @@ import sys
 import numpy as np
 import pytest
 
-from tether_gym_agents import paper
+from tether_gym_agents import evaluation, paper
 
 FIGURES = (
     "fig2_zero_state_angles.png",
@@ -27,7 +27,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    code = paper.main(["--out", str(out), "--orbits", "0.2", "--quick"])
+    code = evaluation.main(["paper", "--out", str(out), "--orbits", "0.2", "--quick"])
     return code, out
 
 
@@ -56,6 +56,36 @@ def test_main_writes_figures_and_table(short_run):
     assert result["smc_default"]["settings"]["control_step"] == 0.025
     verdicts = {r["quantity"]: r["verdict"] for r in result["table"]}
     assert verdicts["SMC: mean l_1 + l_2 after orbit 1"] == "n/a (run too short)"
+    # the repository's own model notes are cited, never a path outside the repository
+    assert "docs/model.md" in table and "shared/" not in table and "NOTES.md" not in table
+    # the header quotes the env's real defaults
+    from tether_gym.envs.config import EnvConfig
+
+    cfg = EnvConfig()
+    assert (f"RK4 step {cfg.physics_step:g}, reel lag {cfg.reel_time_constant:g}"
+            in table.splitlines()[4])
+    # strict JSON
+    json.loads((out / "paper_vs_tether_gym.json").read_text(),
+               parse_constant=lambda token: pytest.fail(f"bare {token} in the JSON"))
+
+
+def test_paper_trajectories_come_from_the_benchmark_rollout():
+    """The paper's sliding-mode run is the benchmark's rollout, metrics included."""
+    from tether_gym_agents.metrics import episode_metrics
+    from tether_gym_agents.paper.measures import smc_metrics
+    from tether_gym_agents.paper.runs import run_smc
+    from tether_gym_agents.rollout import make_vector_env, rollout
+    from tether_gym_agents.smc import SlidingModeController
+
+    traj = run_smc(0.3, {})
+    venv = make_vector_env(1, {"orbits_per_episode": 0.3})
+    same = rollout(SlidingModeController.for_env(venv), [0], env=venv)[0]
+    venv.close()
+    np.testing.assert_array_equal(traj.theta, same.theta)
+    np.testing.assert_array_equal(traj.command, traj.action.clip(-1, 1) * 0.5)
+    m, bench = smc_metrics(traj), episode_metrics(traj)
+    assert m["min_tension"] == bench["min_tension"]
+    assert m["convergence_orbits"] is None and math.isnan(bench["converge_orbits"])
 
 
 @pytest.mark.parametrize("argv", [[], ["--out"], ["--out", "x", "--orbits", "0"],
@@ -70,7 +100,7 @@ def test_main_rejects_bad_arguments(argv, capsys):
 
 def test_missing_matplotlib_names_the_pip_command(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib.figure", None)
-    with pytest.raises(ImportError, match=r'pip install "tether_gym\[plot\]"'):
+    with pytest.raises(ImportError, match=r'pip install "matplotlib>=3.7"'):
         paper.reproduce(tmp_path / "out", orbits=0.01, quick=True, log=None)
     assert not (tmp_path / "out").exists()  # failed before any run or output
 

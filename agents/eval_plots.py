@@ -1,0 +1,115 @@
+"""Plots of the benchmark: one trajectory per policy, and IQM interval estimates.
+
+* ``trajectories.png``: max_i |theta_i - theta_d| and l_1 + ... + l_n over the first
+  scenario's first seed (run 0) of every policy; the title names the scenario, and an
+  episode that ended in a failure ends with an ``x`` marker labelled with the reason.
+* ``metrics.png``: per metric, each policy's IQM (dot) with its 95 % stratified-bootstrap
+  interval (bar), as rliable's ``plot_interval_estimates``; an undefined value (such as
+  the convergence time of a policy that never converges) is written "n/a", never drawn.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from .results import TABLE_COLUMNS
+
+__all__ = ["plot_results", "PLOT_PIP"]
+
+PLOT_PIP = 'pip install "matplotlib>=3.7"'
+LOG_SCALE = ("tracking_rms", "final_error", "chattering", "reel_effort")
+
+
+def _finite(x) -> bool:
+    return x is not None and math.isfinite(x)
+
+
+def plot_results(results: dict, trajectories: dict, scenario, out: Path, log=print) -> list:
+    """Write ``trajectories.png`` and ``metrics.png`` into ``out``; return the paths.
+
+    Without matplotlib, logs the pip command and writes nothing.
+    """
+    log = log or (lambda *a, **k: None)
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        log(f"  (plots skipped: matplotlib is missing; install it with: {PLOT_PIP})")
+        return []
+    out = Path(out)
+    written = [_trajectories(Figure, FigureCanvasAgg, trajectories, scenario, out),
+               _intervals(Figure, FigureCanvasAgg, results, out)]
+    log(f"  wrote {written[0]} and {written[1]}")
+    return written
+
+
+def _trajectories(Figure, Canvas, trajectories: dict, scenario, out: Path) -> Path:
+    fig = Figure(figsize=(10, 6.5), layout="constrained")
+    Canvas(fig)
+    ax_err, ax_len = fig.subplots(2, 1, sharex=True)
+    seed = None
+    for name, traj in trajectories.items():
+        seed = traj.seed
+        orbits = traj.orbits[1:]
+        err = np.maximum(traj.tracking_error[1:], 1e-7)
+        total = traj.length[1:].sum(axis=1)
+        line, = ax_err.semilogy(orbits, err, label=name)
+        ax_len.plot(orbits, total, color=line.get_color(), label=name)
+        if traj.failure is not None:
+            for ax, y in ((ax_err, err[-1]), (ax_len, total[-1])):
+                ax.plot([orbits[-1]], [y], "x", color=line.get_color(), ms=10, mew=2)
+                ax.annotate(traj.failure, (orbits[-1], y), textcoords="offset points",
+                            xytext=(4, 4), fontsize=8, color=line.get_color())
+    title = f"scenario {scenario.name!r}"
+    if scenario.description:
+        title += f": {scenario.description}"
+    ax_err.set_title(f"{title}; seed {seed}, run 0 (x: episode ended in a failure)",
+                     fontsize=9)
+    ax_err.set_ylabel("max |theta - theta_d| [rad]")
+    ax_err.legend(ncol=3, fontsize=8)
+    ax_len.set_ylabel("l1 + ... + l_n [-]")
+    ax_len.set_xlabel("true anomaly [orbits]")
+    path = out / "trajectories.png"
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
+    pols = results["policies"]
+    names = list(pols)
+    fig = Figure(figsize=(13, 1.2 + 0.45 * len(names) * 2), layout="constrained")
+    Canvas(fig)
+    axes = fig.subplots(2, 4).ravel()
+    ys = np.arange(len(names))[::-1]
+    for ax, (key, title) in zip(axes, TABLE_COLUMNS, strict=True):
+        values = [pols[p][key] for p in names]
+        cis = [pols[p]["ci95"][key] for p in names]
+        drawn = [v for v in values if _finite(v)]
+        log_scale = key in LOG_SCALE and drawn and min(drawn) > 0
+        for y, value, ci in zip(ys, values, cis, strict=True):
+            if not _finite(value):
+                ax.text(0.5, y, "n/a", transform=ax.get_yaxis_transform(), ha="center",
+                        va="center", fontsize=8, color="grey")
+                continue
+            if ci is not None and _finite(ci[0]) and _finite(ci[1]):
+                ax.plot([ci[0], ci[1]], [y, y], "-", lw=5, alpha=0.35, color="C0",
+                        solid_capstyle="butt")
+            ax.plot([value], [y], "o", color="C0", ms=5)
+        if log_scale:
+            from matplotlib.ticker import NullFormatter
+
+            ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_yticks(ys, names, fontsize=8)
+        ax.set_ylim(-0.7, len(names) - 0.3)
+        ax.set_title(title, fontsize=9)
+        ax.grid(True, axis="x", alpha=0.3)
+    fig.suptitle("IQM over runs x scenarios with 95 % stratified-bootstrap intervals "
+                 f"(suite {results['suite']!r}; intervals need 2+ runs; n/a: undefined)",
+                 fontsize=10)
+    path = out / "metrics.png"
+    fig.savefig(path, dpi=100)
+    return path

@@ -1,0 +1,268 @@
+"""results.json and the printed tables of the benchmark.
+
+``results.json`` is strict JSON (undefined values are ``null``, never ``NaN``)::
+
+    meta        versions, command, git commit, threads, agent files with sha256
+    suite, seeds, env_kwargs, scenarios {name: {description, env_kwargs, nominal}}
+    statistics  how the numbers below are computed
+    policies    {name: {kind, n_runs, runs, n_episodes, <metric>: IQM, ...,
+                        ci95: {metric: [lo, hi] or null},
+                        probability_of_improvement: {metric: p or null},
+                        failures: {slack, tumble, length}}}
+    per_scenario {scenario: {policy: {<metric>: IQM over runs}}}
+    episodes    [{policy, run, scenario, seed, <every metric>}, ...]
+
+so that anyone can recompute the statistics from ``episodes``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import platform
+import subprocess
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from .metrics import FAILURES, HIGHER_IS_BETTER, METRICS
+from .stats import (
+    BOOTSTRAP_SEED,
+    N_BOOTSTRAP,
+    iqm,
+    probability_of_improvement,
+    run_scores,
+    stratified_bootstrap_ci,
+)
+
+__all__ = ["build_results", "write_results", "markdown_tables", "to_jsonable", "run_meta",
+           "TABLE_COLUMNS", "REFERENCE_POLICY"]
+
+REFERENCE_POLICY = "smc"
+"""The baseline of the probability of improvement."""
+TABLE_COLUMNS = (
+    ("success", "success rate"),
+    ("tracking_rms", "tracking RMS [rad]"),
+    ("final_error", "last-orbit max err [rad]"),
+    ("converge_orbits", "converge [orbits]"),
+    ("min_tension", "min T^ [-]"),
+    ("reel_effort", "reel effort [-]"),
+    ("reel_excursion", "reel excursion [-]"),
+    ("chattering", "chattering [-]"),
+)
+PACKAGES = ("tether_gym", "numpy", "scipy", "gymnasium", "numba", "torch",
+            "stable-baselines3", "matplotlib")
+
+
+def to_jsonable(x):
+    """``x`` with numpy scalars/arrays as Python values, tuples as lists, NaN/inf as None."""
+    if isinstance(x, dict):
+        return {str(k): to_jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [to_jsonable(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return to_jsonable(x.tolist())
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        return float(x) if math.isfinite(x) else None
+    if isinstance(x, Path):
+        return str(x)
+    return x
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def agent_files(path: Path) -> dict:
+    """``{file name: sha256}`` of an agent: the file itself, or a run folder's files."""
+    path = Path(path)
+    files = [path] if path.is_file() else sorted(p for p in path.iterdir() if p.is_file())
+    return {p.name: _sha256(p) for p in files}
+
+
+def display_path(path) -> str:
+    """``path`` relative to the repository (or working directory) when inside it."""
+    path = Path(path).resolve()
+    for root in (Path(__file__).resolve().parent.parent, Path.cwd()):
+        try:
+            return str(path.relative_to(root))
+        except ValueError:
+            continue
+    return str(path)
+
+
+def _git_commit() -> dict | None:
+    root = Path(__file__).resolve().parent.parent
+    if not (root / ".git").exists():
+        return None
+    try:
+        commit = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], check=True,
+                                capture_output=True, text=True, timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(root), "status", "--porcelain",
+                                "--untracked-files=no"], check=True, capture_output=True,
+                               text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return {"commit": commit, "dirty": bool(dirty)}
+
+
+def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
+    """The ``meta`` block: versions, command, git commit, threads, agent files."""
+    versions = {"python": platform.python_version()}
+    for name in PACKAGES:
+        try:
+            versions[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    threads = {"torch": None, "numba": None}
+    try:
+        import numba
+
+        threads["numba"] = int(numba.get_num_threads())
+    except ImportError:  # pragma: no cover - numba is a dependency
+        pass
+    if any(s.kind.value != "baseline" for s in specs):
+        import torch
+
+        threads["torch"] = int(torch.get_num_threads())
+    git = _git_commit()
+    return {
+        "versions": versions,
+        "command": command,
+        "git_commit": git["commit"] if git else None,
+        "git_dirty": git["dirty"] if git else None,
+        "platform": platform.platform(),
+        "threads": threads,
+        "torch_threads_requested": torch_threads,
+        "agents": {s.name: [{"path": display_path(p), "files": agent_files(p)}
+                            for p in s.runs]
+                   for s in specs if s.kind.value != "baseline"},
+    }
+
+
+def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_kwargs: dict,
+                  suite: str, command: str | None = None,
+                  torch_threads: int | None = None) -> dict:
+    """The results dict (module docstring) from the per-episode records."""
+    scenario_names = [st.scenario.name for st in settings]
+    by_policy = {s.name: [e for e in episodes if e["policy"] == s.name] for s in specs}
+    scores = {s.name: {m: run_scores(by_policy[s.name], m, list(range(s.n_runs)),
+                                     scenario_names) for m in METRICS} for s in specs}
+    reference = scores.get(REFERENCE_POLICY)
+    policies = {}
+    for spec in specs:
+        eps = by_policy[spec.name]
+        block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
+                 "runs": [None if p is None else display_path(p) for p in spec.runs],
+                 "n_episodes": len(eps)}
+        for m in METRICS:
+            block[m] = iqm(scores[spec.name][m])
+        block["success_rate"] = block["success"]
+        block["ci95"] = {m: stratified_bootstrap_ci(scores[spec.name][m]) for m in METRICS}
+        block["probability_of_improvement"] = {
+            m: (None if reference is None else probability_of_improvement(
+                scores[spec.name][m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
+        block["failures"] = {f: int(sum(e[f] for e in eps)) for f in FAILURES}
+        policies[spec.name] = block
+    per_scenario = {
+        sc: {spec.name: {m: iqm(scores[spec.name][m][:, j]) for m in METRICS}
+             for spec in specs}
+        for j, sc in enumerate(scenario_names)}
+    return {
+        "meta": run_meta(specs, command, torch_threads),
+        "suite": str(suite),
+        "seeds": list(seeds),
+        "env_kwargs": env_kwargs,
+        "scenarios": {st.scenario.name: {"description": st.scenario.description,
+                                         "env_kwargs": st.env_kwargs,
+                                         "nominal": st.scenario.nominal}
+                      for st in settings},
+        "statistics": {
+            "point_estimate": "interquartile mean (scipy.stats.trim_mean, 25 % cut at each "
+                              "end) over runs x scenarios of each run's mean over its "
+                              "episodes; undefined episode values left out",
+            "ci95": f"95 % percentile interval of the IQM over {N_BOOTSTRAP} stratified "
+                    "bootstrap resamples (runs drawn with replacement within each "
+                    f"scenario, seed {BOOTSTRAP_SEED}); null with fewer than 2 runs",
+            "probability_of_improvement": f"P(policy improves on {REFERENCE_POLICY}) per "
+                                          "scenario over all pairs of runs (Mann-Whitney U / "
+                                          "(n_x n_y), ties 1/2), averaged over scenarios; "
+                                          "null if smc was not evaluated",
+            "higher_is_better": sorted(HIGHER_IS_BETTER),
+            "reference": "Agarwal et al. (2021), Deep RL at the Edge of the Statistical "
+                         "Precipice, NeurIPS",
+        },
+        "policies": policies,
+        "per_scenario": per_scenario,
+        "episodes": episodes,
+    }
+
+
+def write_results(results: dict, path: Path) -> None:
+    """Write ``results`` as strict JSON (no NaN tokens) to ``path``."""
+    text = json.dumps(to_jsonable(results), indent=1, allow_nan=False)
+    Path(path).write_text(text + "\n")
+
+
+def _num(x) -> str:
+    if x is None or not math.isfinite(x):
+        return "n/a"
+    if x == 0 or 0.01 <= abs(x) < 1e4:
+        return f"{x:.3f}"
+    return f"{x:.2g}"
+
+
+def _cell(block: dict, metric: str) -> str:
+    text = _num(block[metric])
+    ci = block["ci95"][metric]
+    if ci is not None:
+        text += f" [{_num(ci[0])}, {_num(ci[1])}]"
+    return text
+
+
+def markdown_tables(results: dict) -> str:
+    """The printed tables: IQM [95 % CI] per policy, probability of improvement over
+    smc, and a per-scenario table."""
+    pols = results["policies"]
+    names = list(pols)
+    lines = ["IQM over training runs x scenarios [95 % stratified-bootstrap CI, 2+ runs]", "",
+             "| policy | kind | runs | " + " | ".join(t for _, t in TABLE_COLUMNS)
+             + " | failures slack/tumble/length |",
+             "|---" * (len(TABLE_COLUMNS) + 4) + "|"]
+    for name, block in pols.items():
+        counts = "/".join(str(block["failures"][f]) for f in FAILURES)
+        lines.append(f"| {name} | {block['kind']} | {block['n_runs']} | "
+                     + " | ".join(_cell(block, m) for m, _ in TABLE_COLUMNS)
+                     + f" | {counts} |")
+    if any(v is not None for b in pols.values() for v in b["probability_of_improvement"].values()):
+        lines += ["", f"Probability of improvement over {REFERENCE_POLICY} "
+                      "(per scenario over pairs of runs, averaged over scenarios)", "",
+                  "| policy | " + " | ".join(t for _, t in TABLE_COLUMNS) + " |",
+                  "|---" * (len(TABLE_COLUMNS) + 1) + "|"]
+        for name, block in pols.items():
+            poi = block["probability_of_improvement"]
+            lines.append(f"| {name} | " + " | ".join(
+                "n/a" if poi[m] is None else f"{poi[m]:.2f}" for m, _ in TABLE_COLUMNS) + " |")
+    lines += ["", "Per scenario (IQM over runs): success rate / tracking RMS after orbit 1 "
+                  "[rad]", "",
+              "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for sc, per in results["per_scenario"].items():
+        cells = []
+        for p in names:
+            rms = per[p]["tracking_rms"]
+            success = per[p]["success"]
+            cells.append(("n/a" if success is None or not math.isfinite(success)
+                          else f"{success:.2f}") + " / "
+                         + (f"{rms:.2e}" if rms is not None and math.isfinite(rms) else "n/a"))
+        lines.append(f"| {sc} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

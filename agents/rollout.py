@@ -1,0 +1,213 @@
+"""Run policies on the native vector env and record every episode: the one rollout path.
+
+:func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation`) and by
+the paper reproduction (:mod:`tether_gym_agents.paper`). It builds
+``gym.make_vec("tether_gym/TetherLibration-v0", num_envs=len(seeds),
+vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
+``seeds[i]`` and steps all of them together until each has ended once. Every policy is
+called through stable-baselines3's interface, ``policy.predict(obs, deterministic=True)``,
+with **one observation per call** (``obs[i:i + 1]``): a batched forward pass of a torch
+network changes an action by ~1e-7 with the batch size, which a closed loop can amplify
+into a different episode. With one observation per call, an episode's actions depend on
+its seed, the env arguments and the policy only, never on how many episodes run beside
+it or in which order the policies are evaluated.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+from tether_gym import ENV_ID
+
+from .obs import ObservationLayout
+
+__all__ = ["Trajectory", "rollout", "RECORDED_KEYS"]
+
+RECORDED_KEYS = ("nu", "theta", "dtheta", "length", "dlength", "tension", "tension_min",
+                 "theta_ref", "reel_accel")
+"""The env ``info`` entries kept for every sample of a :class:`Trajectory`."""
+
+ORBIT = 2.0 * math.pi
+
+
+@dataclass
+class Trajectory:
+    """One episode: the reset state (row 0) and the state after every control step.
+
+    The arrays named in :data:`RECORDED_KEYS` have K + 1 rows for K steps (row 0 from
+    the reset ``info``); ``action`` (as given to the env), ``command`` (the commanded
+    reel rate l'_cmd [-] held over step k, after clipping) and ``reward`` have K rows.
+    ``tension`` is T^ at the sample, ``tension_min`` the smallest T^ at the physics
+    substep boundaries of the step that ended there.
+
+    Attributes
+    ----------
+    failure : str or None
+        Why the episode was terminated (``info["failure"]`` of its last step).
+    truncated : bool
+        Ended by the time limit (and not terminated).
+    seed : int or None
+        The env seed of the episode.
+    settings : dict
+        The env configuration values the paper tables quote.
+    """
+
+    nu: np.ndarray
+    theta: np.ndarray
+    dtheta: np.ndarray
+    length: np.ndarray
+    dlength: np.ndarray
+    tension: np.ndarray
+    tension_min: np.ndarray
+    theta_ref: np.ndarray
+    reel_accel: np.ndarray
+    action: np.ndarray
+    command: np.ndarray
+    reward: np.ndarray
+    failure: str | None
+    truncated: bool
+    seed: int | None = None
+    settings: dict = field(default_factory=dict)
+
+    @property
+    def orbits(self) -> np.ndarray:
+        """(nu - nu(0)) / 2 pi [orbits] of each sample."""
+        return (self.nu - self.nu[0]) / ORBIT
+
+    @property
+    def tracking_error(self) -> np.ndarray:
+        """max_i |theta_i - theta_d| [rad] per sample."""
+        return np.abs(self.theta - self.theta_ref[:, None]).max(axis=1)
+
+    @property
+    def duration(self) -> float:
+        """Orbits actually simulated."""
+        return float(self.orbits[-1])
+
+    @property
+    def steps(self) -> int:
+        """Number of control steps K."""
+        return int(self.action.shape[0])
+
+
+def _settings(cfg) -> dict:
+    return {"control_step": cfg.control_step, "physics_step": cfg.physics_step,
+            "reel_time_constant": cfg.reel_time_constant, "accel_limit": cfg.accel_limit,
+            "eccentricity": cfg.eccentricity, "amplitude": cfg.amplitude,
+            "max_reel_rate": cfg.max_reel_rate, "total_tether_length": cfg.total_tether_length}
+
+
+def make_vector_env(num_envs: int, env_kwargs: dict | None = None):
+    """The native vector env of the rollouts.
+
+    ``max_episode_steps`` defaults to -1 (no step cap): an episode ends when the env's
+    own configuration says so (``orbits_per_episode``), so lengthened episodes are not
+    cut at the registered 754 steps. Pass ``max_episode_steps`` in ``env_kwargs`` to cap.
+    """
+    kwargs = dict(env_kwargs or {})
+    kwargs.setdefault("max_episode_steps", -1)
+    return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
+                        **kwargs)
+
+
+def rollout(policies, seeds: Sequence[int | None], env_kwargs: dict | None = None,
+            options: dict | None = None, env=None) -> list[Trajectory]:
+    """One episode per seed, run side by side on the native vector env.
+
+    Parameters
+    ----------
+    policies : object with ``predict`` or a sequence of them
+        ``policies[i]`` drives the episode of ``seeds[i]`` (one object for all when a
+        single policy is given). Each is called as ``predict(obs[i:i + 1],
+        deterministic=True)`` and must return an action of shape (1, N-1) or (N-1,).
+    seeds : sequence of int or None
+        Env seed of each episode (sub-env i is reset with ``seeds[i]``).
+    env_kwargs : dict or None
+        Arguments of the env (see :func:`make_vector_env`); ignored when ``env`` is given.
+    options : dict or None
+        Reset options applied to every episode (see ``TetherLibrationEnv.reset``).
+    env : TetherLibrationVectorEnv or None
+        An existing vector env with ``len(seeds)`` sub-envs (left open); None builds
+        one and closes it afterwards.
+
+    Returns
+    -------
+    list of Trajectory
+        One per seed, in the order of ``seeds``.
+    """
+    seeds = list(seeds)
+    num = len(seeds)
+    if num < 1:
+        raise ValueError("rollout needs at least one seed")
+    if hasattr(policies, "predict"):
+        policies = [policies] * num
+    policies = list(policies)
+    if len(policies) != num:
+        raise ValueError(f"got {len(policies)} policies for {num} seeds; give one policy or "
+                         "one per seed")
+    own = env is None
+    venv = make_vector_env(num, env_kwargs) if own else env
+    try:
+        return _run(venv, policies, seeds, options)
+    finally:
+        if own:
+            venv.close()
+
+
+def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajectory]:
+    base = venv.unwrapped
+    if base.num_envs != len(seeds):
+        raise ValueError(f"env has {base.num_envs} sub-envs for {len(seeds)} seeds")
+    cfg = base.config
+    layout = ObservationLayout.from_env(base)
+    n_act = int(base.single_action_space.shape[0])
+    num = len(seeds)
+    obs, info = venv.reset(seed=seeds, options=options)
+    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS}
+    actions_log, rewards_log = [], []
+    active = np.ones(num, dtype=bool)
+    end = np.zeros(num, dtype=np.int64)
+    failure: list[str | None] = [None] * num
+    truncated = np.zeros(num, dtype=bool)
+    actions = np.zeros((num, n_act), dtype=np.float32)
+    step = 0
+    while active.any():
+        for i in np.flatnonzero(active).tolist():
+            action, _ = policies[i].predict(obs[i:i + 1], deterministic=True)
+            action = np.asarray(action, dtype=np.float32)
+            if action.size != n_act:
+                raise ValueError(f"policy {policies[i]!r} returned an action of shape "
+                                 f"{action.shape}; this env needs ({n_act},) per observation")
+            actions[i] = action.reshape(n_act)
+        actions[~active] = 0.0
+        obs, reward, terminated, trunc, info = venv.step(actions)
+        step += 1
+        actions_log.append(actions.copy())
+        rewards_log.append(np.array(reward, dtype=float))
+        for key in RECORDED_KEYS:
+            rows[key].append(np.array(info[key], dtype=float))
+        ended = active & (terminated | trunc)
+        for i in np.flatnonzero(ended).tolist():
+            end[i] = step
+            failure[i] = info["failure"][i]
+            truncated[i] = bool(trunc[i] and not terminated[i])
+        active &= ~ended
+    stacked = {key: np.stack(value) for key, value in rows.items()}
+    acts = np.stack(actions_log)
+    rews = np.stack(rewards_log)
+    settings = _settings(cfg)
+    out = []
+    for i in range(num):
+        k = int(end[i])
+        arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
+        action = acts[:k, i]
+        out.append(Trajectory(**arrays, action=action, command=layout.to_reel_rate(action),
+                              reward=rews[:k, i], failure=failure[i],
+                              truncated=bool(truncated[i]), seed=seeds[i],
+                              settings=dict(settings)))
+    return out
