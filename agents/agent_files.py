@@ -35,6 +35,7 @@ import json
 import math
 import warnings
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -432,7 +433,7 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None):
     warnings.warn(PICKLE_WARNING.format(files=[str(model_path)]), stacklevel=2)
     from stable_baselines3 import PPO, SAC
 
-    cls = {"ppo": PPO, "sac": SAC}[algo]
+    cls: Any = {"ppo": PPO, "sac": SAC}[algo]
     try:
         model = cls.load(model_path, device="cpu")
     except (zipfile.BadZipFile, KeyError, ValueError, EOFError, RuntimeError) as exc:

@@ -29,7 +29,7 @@ def parse_env_kwargs(items, flag: str = "--env-kwargs") -> dict:
     out: dict = {}
     for item in items or []:
         if not isinstance(item, str) or "=" not in item:
-            raise ValueError(f"{flag}: entry {item!r} must look like key=value, e.g. "
+            raise ValueError(f"{flag} {item!r}: each entry must look like key=value, e.g. "
                              "eccentricity=0.3 or masses=(1,2)")
         key, text = item.split("=", 1)
         key = key.strip()
@@ -42,9 +42,9 @@ def parse_env_kwargs(items, flag: str = "--env-kwargs") -> dict:
             value = ast.literal_eval(text)
         except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
             if not _BARE_WORD.match(text):
-                raise ValueError(f"{flag}: value of {key!r} is not a Python literal: "
-                                 f"{text!r} (use numbers, 'strings', (tuples), [lists], "
-                                 "True/False/None)") from None
+                raise ValueError(f"{flag} {item!r}: {text!r} is not a Python literal; allowed: "
+                                 "numbers, True/False/None, tuples/lists like (1, 2), quoted "
+                                 "strings or bare words like full") from None
             value = _WORDS.get(text.lower(), text)
         out[key] = value
     return out

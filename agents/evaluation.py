@@ -30,6 +30,7 @@ import time
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -71,9 +72,11 @@ class PolicySpec:
     kind: PolicyKind
     runs: list
     agents: list = field(default_factory=list)
+    allow_pickle: bool = False
 
     @property
     def n_runs(self) -> int:
+        """Number of training runs (1 for a baseline)."""
         return len(self.runs)
 
     def load(self) -> None:
@@ -82,7 +85,8 @@ class PolicySpec:
 
         if self.kind is PolicyKind.BASELINE or self.agents:
             return
-        self.agents = [TrainedAgent.load(path) for path in self.runs]
+        self.agents = [TrainedAgent.load(path, allow_pickle=self.allow_pickle)
+                       for path in self.runs]
 
     def policies(self, run: int, env, scenario: Scenario, seeds: list[int]) -> list:
         """One ``predict`` object per seed for ``run`` on the env of ``scenario``.
@@ -91,6 +95,7 @@ class PolicySpec:
         seeded with the episode's seed, so that its actions do not depend on the other
         episodes.
         """
+        from .obs import ReelRatePolicy
         from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
         from .smc import SlidingModeController
 
@@ -107,7 +112,7 @@ class PolicySpec:
                 nominal = TetherChain(scenario.nominal["masses"],
                                       scenario.nominal["eccentricity"], cfg.gravity,
                                       cfg.total_tether_length / cfg.semi_latus_rectum)
-            policy = SlidingModeController.for_env(env, nominal=nominal)
+            policy: ReelRatePolicy = SlidingModeController.for_env(env, nominal=nominal)
         elif self.name == "zero":
             policy = ZeroStateReel.for_env(env)
         else:
@@ -125,20 +130,17 @@ def _seed_runs(path: Path) -> list[Path]:
 
 
 def shipped_agents() -> dict[str, Path]:
-    """Shipped agents: run folders and folders of seed run folders in ``pretrained/``."""
-    from .trained import PRETRAINED_DIR, pretrained_agents
+    """Shipped agents: agent folders and folders of seed run folders in ``pretrained/``."""
+    from .trained import pretrained_agents
 
-    found = dict(pretrained_agents())
-    if PRETRAINED_DIR.is_dir():
-        for path in sorted(PRETRAINED_DIR.iterdir()):
-            if path.name not in found and _seed_runs(path):
-                found[path.name] = path
-    return dict(sorted(found.items()))
+    return pretrained_agents()
 
 
-def resolve_policy(name: str) -> PolicySpec:
+def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     """PolicySpec of a baseline name, a shipped agent's name or a path.
 
+    ``allow_pickle`` lets a run folder without the safe agent files load
+    stable-baselines3's pickled ones (which run code when loaded).
     Raises ValueError listing the valid names when ``name`` is none of these.
     """
     if name in BASELINES:
@@ -152,7 +154,7 @@ def resolve_policy(name: str) -> PolicySpec:
         raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
                          "agent (run folder, model file or folder of seed_K run folders)")
     runs = _seed_runs(path) or [path]
-    return PolicySpec(name, PolicyKind.RL, runs)
+    return PolicySpec(name, PolicyKind.RL, runs, allow_pickle=allow_pickle)
 
 
 def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):
@@ -172,7 +174,7 @@ class _Setting:
 
     scenario: Scenario
     env_kwargs: dict
-    env: object
+    env: Any
 
 
 def _prepare(specs: list[PolicySpec], scenarios, env_kwargs: dict, seeds: list[int],
@@ -215,7 +217,7 @@ def _prepare(specs: list[PolicySpec], scenarios, env_kwargs: dict, seeds: list[i
 def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, seed: int = 0,
              out: Path | None = None, plots: bool = True, log=print,
              env_kwargs: dict | None = None, torch_threads: int | None = 1,
-             command: str | None = None) -> dict:
+             command: str | None = None, allow_pickle: bool = False) -> dict:
     """Evaluate ``policies`` on every scenario of ``suite``; return the results dict.
 
     Parameters
@@ -241,6 +243,9 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
         ``torch.set_num_threads`` before trained agents run (None: leave torch alone).
     command : str or None
         The command line recorded in ``results.json``'s ``meta``.
+    allow_pickle : bool
+        Let run folders without the safe agent files load stable-baselines3's pickled
+        files (a pickle runs code when loaded: only for files you made or trust).
 
     Returns
     -------
@@ -256,7 +261,7 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
     scenarios = get_suite(suite)
     if out is not None:
         check_out_dir(Path(out), "out")
-    specs = [resolve_policy(p) for p in policies]
+    specs = [resolve_policy(p, allow_pickle) for p in policies]
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise ValueError(f"policies {names} name one policy twice")
@@ -352,6 +357,10 @@ def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
                         help="torch threads for trained agents (default 1; results do not "
                              "depend on it)")
     parser.add_argument("--no-plots", action="store_true", help="skip the plots")
+    parser.add_argument("--allow-pickle", action="store_true",
+                        help="also load stable-baselines3's pickled files (*.zip, "
+                             "vecnormalize.pkl) when a folder has no agent.json; a pickle "
+                             "runs code when loaded: only for files you made or trust")
     return parser
 
 
@@ -424,7 +433,8 @@ def main(argv=None) -> int:
               f"{args.torch_threads}" + (f", env kwargs {env_kwargs}" if env_kwargs else ""))
         results = evaluate(policies, args.suite, args.seeds, args.seed, args.out,
                            plots=not args.no_plots, env_kwargs=env_kwargs,
-                           torch_threads=args.torch_threads, command=command)
+                           torch_threads=args.torch_threads, command=command,
+                           allow_pickle=args.allow_pickle)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         return 2

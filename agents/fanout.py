@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import io
 import json
 import logging
 import os
@@ -53,6 +54,7 @@ import time
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import Any
 
 from .training import ConfigError, load_hyperparams, parse_env_kwargs
 
@@ -171,6 +173,27 @@ def config_path(args) -> Path:
     return Path(args.config) if args.config else CONFIG_DIR / f"{args.algo}.yml"
 
 
+class _ErrorLines(io.TextIOBase):
+    """Writes through to ``stream`` and keeps the last ``train.py: error:`` line."""
+
+    def __init__(self, stream):
+        self.stream = stream
+        self.last = ""
+
+    def write(self, text: str) -> int:
+        for line in text.splitlines():
+            if line.startswith("train.py: error:"):
+                self.last = line
+        return self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+
+PATH_OPTIONS = ("config", "sweep")
+"""Options of train.py that name files: made absolute for the tasks (other nodes)."""
+
+
 def seed_argv(parser: argparse.ArgumentParser, args: argparse.Namespace, **changes) -> list[str]:
     """The ``train.py`` arguments that reproduce ``args`` with ``changes`` applied.
 
@@ -193,7 +216,9 @@ def seed_argv(parser: argparse.ArgumentParser, args: argparse.Namespace, **chang
             continue
         items = value if isinstance(value, (list, tuple)) else [value]
         out.append(flag)
-        out.extend(str(Path(v).absolute()) if isinstance(v, Path) else str(v) for v in items)
+        out.extend(str(Path(v).absolute())
+                   if isinstance(v, Path) or action.dest in PATH_OPTIONS else str(v)
+                   for v in items)
     return out
 
 
@@ -249,10 +274,11 @@ def train_seed(job: SeedJob, threads: int = 1) -> dict:
 
     torch.set_num_threads(threads)
     with contextlib.suppress(ValueError):  # NUMBA_NUM_THREADS lower than `threads`
-        numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+        limit = numba.config.NUMBA_NUM_THREADS  # type: ignore[attr-defined]
+        numba.set_num_threads(min(threads, limit))
     t0 = time.perf_counter()
-    result = {"label": job.label, "run_dir": str(job.run_dir), "status": "trained", "calls": 0,
-              "message": ""}
+    result: dict[str, Any] = {"label": job.label, "run_dir": str(job.run_dir),
+                              "status": "trained", "calls": 0, "message": ""}
     job.run_dir.mkdir(parents=True, exist_ok=True)
     state, steps = run_state(job.run_dir, job.target)
     if state is RunState.DONE:
@@ -274,8 +300,10 @@ def train_seed(job: SeedJob, threads: int = 1) -> dict:
                   f"step {steps}/{job.target} (torch threads {torch.get_num_threads()}, numba "
                   f"threads {numba.get_num_threads()}, pid {os.getpid()}): train.py "
                   f"{' '.join(argv)}", flush=True)
+            errors = _ErrorLines(sys.stderr)
             try:
-                rc = train_main(argv)
+                with contextlib.redirect_stderr(errors):
+                    rc = train_main(argv)
             except Exception as exc:  # reported per seed; the other seeds go on
                 import traceback
 
@@ -284,7 +312,8 @@ def train_seed(job: SeedJob, threads: int = 1) -> dict:
             result["calls"] += 1
             if rc != 0:
                 result["status"] = "failed"
-                result["message"] = result["message"] or f"train.py exited {rc}"
+                result["message"] = (result["message"] or errors.last
+                                     or f"train.py exited {rc}")
                 break
             state, steps = run_state(job.run_dir, job.target)
         print(f"==== {job.label}: {result['status']} at step {steps}", flush=True)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -13,9 +13,11 @@ __all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy"]
 
 
 class ObservedState(NamedTuple):
-    """The observation's fields (:data:`tether_gym.envs.layout.OBSERVATION`), each with a
-    leading batch axis; scalars are (B,), per-tether fields (B, n), absent optional
-    fields None."""
+    """The observation's fields (:data:`tether_gym.envs.layout.OBSERVATION`).
+
+    Each has a leading batch axis: scalars are (B,), per-tether fields (B, n), absent
+    optional fields None.
+    """
 
     sin_nu: np.ndarray
     cos_nu: np.ndarray
@@ -55,6 +57,7 @@ class ObservationLayout:
 
     @classmethod
     def from_env(cls, env) -> ObservationLayout:
+        """The layout of a TetherLibration env (wrapped or not)."""
         cfg = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
         return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.with_params)
 
@@ -84,7 +87,7 @@ class ObservationLayout:
         if obs.ndim != 2 or obs.shape[1] != expected:
             raise ValueError(f"observation batch must have shape (B, {expected}), got {obs.shape}")
         slices = OBSERVATION.slices(self.n_tethers, params=self.with_params)
-        values = {}
+        values: dict[str, Any] = {}
         for f in OBSERVATION:
             sl = slices.get(f.name)
             values[f.name] = (None if sl is None else
@@ -96,8 +99,11 @@ class ObservationLayout:
         return np.clip(np.asarray(reel_rate) / self.max_reel_rate, -1.0, 1.0).astype(np.float32)
 
     def to_reel_rate(self, action: np.ndarray) -> np.ndarray:
-        """Action -> commanded l' [-] (float64), as the env applies it: clipped to [-1, 1]
-        and scaled by ``max_reel_rate`` (the inverse of :meth:`to_action` inside the box)."""
+        """Action -> commanded l' [-] (float64), as the env applies it.
+
+        Clipped to [-1, 1] and scaled by ``max_reel_rate`` (the inverse of
+        :meth:`to_action` inside the box).
+        """
         return np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.max_reel_rate
 
 
@@ -112,6 +118,7 @@ class ReelRatePolicy:
     layout: ObservationLayout
 
     def reel_rate(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        """Commanded reel rates l' (B, N-1) [-] for observations (B, obs_dim)."""
         raise NotImplementedError
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):

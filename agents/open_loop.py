@@ -2,7 +2,7 @@
 
 * :class:`ZeroStateReel` -- Eq. 7, l_i' = l_i e sin(nu) / k, which keeps an aligned
   chain at theta = theta' = 0 (Sec. 3.1).
-* :class:`PeriodicReel` -- Eq. 10 (NOTES.md form), which makes the aligned libration
+* :class:`PeriodicReel` -- Eq. 10 (as corrected in docs/model.md), which makes the aligned libration
   theta = A sin(w nu) a solution (Sec. 3.2).
 * :class:`RandomPolicy` -- uniform actions, the floor of the benchmark.
 
@@ -103,7 +103,7 @@ class ZeroStateReel(ReelRatePolicy):
 
 
 class PeriodicReel(ReelRatePolicy):
-    """Paper Eq. 10 (NOTES.md form) for the aligned libration theta = A sin(w nu).
+    """Paper Eq. 10 (as corrected in docs/model.md) for the aligned libration theta = A sin(w nu).
 
         l_i' = l_i [4 e sin(nu)(1 + theta') + 2 A k w^2 sin(w nu) - 3 sin(2 theta)]
                / (4 k (1 + theta'))
@@ -205,6 +205,7 @@ class RandomPolicy:
 
     @classmethod
     def for_env(cls, env, seed: int | None = None) -> RandomPolicy:
+        """Build for a TetherLibration env (wrapped or not), seeded."""
         return cls(env, seed)
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):

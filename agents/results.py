@@ -118,13 +118,13 @@ def _git_commit() -> dict | None:
 
 def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
     """The ``meta`` block: versions, command, git commit, threads, agent files."""
-    versions = {"python": platform.python_version()}
+    versions: dict[str, str | None] = {"python": platform.python_version()}
     for name in PACKAGES:
         try:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = None
-    threads = {"torch": None, "numba": None}
+    threads: dict[str, int | None] = {"torch": None, "numba": None}
     try:
         import numba
 
@@ -231,8 +231,11 @@ def _cell(block: dict, metric: str) -> str:
 
 
 def markdown_tables(results: dict) -> str:
-    """The printed tables: IQM [95 % CI] per policy, probability of improvement over
-    smc, and a per-scenario table."""
+    """The printed tables.
+
+    IQM [95 % CI] per policy, the probability of improvement over smc, and a
+    per-scenario table.
+    """
     pols = results["policies"]
     names = list(pols)
     lines = ["IQM over training runs x scenarios [95 % stratified-bootstrap CI, 2+ runs]", "",

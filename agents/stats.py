@@ -1,6 +1,6 @@
-"""Statistics across training runs (Agarwal et al. 2021, "Deep RL at the Edge of the
-Statistical Precipice", NeurIPS): interquartile mean, stratified bootstrap intervals and
-the probability of improvement.
+"""Statistics across training runs: IQM, stratified bootstrap, probability of improvement.
+
+After Agarwal et al. 2021, "Deep RL at the Edge of the Statistical Precipice" (NeurIPS).
 
 Scores are matrices ``(n_runs, n_scenarios)``: entry (r, m) is run r's mean of a metric
 over its episodes on scenario m (:func:`run_scores`). A run is one trained agent (one

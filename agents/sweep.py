@@ -450,7 +450,8 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
 
             ray.shutdown()
     trials = []
-    for result in grid:
+    results = [grid[i] for i in range(len(grid))]
+    for result in results:
         if result.config is None:
             continue
         overrides = overrides_of(result.config)
@@ -465,6 +466,6 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
     ranked = rank_trials(trials)
     print(write_table(ranked, out, list(spec.params)))
     print(f"optuna sweep of {len(trials)} trial(s) in {time.perf_counter() - t0:.0f} s")
-    errors = sum(1 for r in grid if r.error)
+    errors = sum(1 for r in results if r.error)
     return 1 if errors else 0
 

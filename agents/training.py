@@ -20,12 +20,10 @@ the run:
 from __future__ import annotations
 
 import argparse
-import ast
 import difflib
 import inspect
 import json
 import math
-import re
 import shlex
 import sys
 import time
@@ -37,6 +35,7 @@ import gymnasium as gym
 import tether_gym
 
 from .agent_files import _jsonable, save_agent
+from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
            "plot_learning_curve", "ConfigError", "CONFIG_DIR"]
@@ -121,39 +120,19 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
     return params
 
 
-_BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.\-]*")
-
-
 def parse_env_kwargs(items: list[str]) -> dict:
-    """Parse ``key=value`` strings; values are Python literals (no code is evaluated).
+    """``--env-kwargs key=value ...`` as a dict (:mod:`tether_gym_agents.env_kwargs`).
 
-    A value that is not a literal is taken as a string only when it is a bare word
-    (``gravity=full``); anything else (``masses=(1,2``, ``x=f()``) is an error.
+    Raises
+    ------
+    ConfigError
+        On a malformed entry or a value that is not a Python literal (no code is
+        evaluated); the message names the flag and the entry.
     """
-    out = {}
-    for item in items or []:
-        if "=" not in item:
-            raise ConfigError(f"--env-kwargs {item!r}: each entry must look like key=value")
-        key, text = item.split("=", 1)
-        key = key.strip()
-        if not key.isidentifier():
-            raise ConfigError(f"--env-kwargs {item!r}: key {key!r} is not a valid name")
-        text = text.strip()
-        try:
-            value = ast.literal_eval(text)
-        except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
-            words = {"None": None, "none": None, "null": None, "true": True, "false": False}
-            if text in words:
-                value = words[text]
-            elif _BARE_WORD.fullmatch(text):
-                value = text
-            else:
-                raise ConfigError(
-                    f"--env-kwargs {item!r}: {text!r} is not a Python literal; allowed: "
-                    "numbers, True/False/None, tuples/lists like (1, 2), quoted strings or "
-                    "bare words like full") from None
-        out[key] = value
-    return out
+    try:
+        return _parse_env_kwargs(items, flag="--env-kwargs")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def resolve_env_kwargs(config_kwargs: dict, user_kwargs: dict, source: str,
@@ -242,14 +221,6 @@ def plot_learning_curve(run_dir: Path) -> Path | None:
     out = Path(run_dir) / "learning_curve.png"
     fig.savefig(out, dpi=100)
     return out
-
-
-def _check_env_id(env_id: str) -> None:
-    ids = [i for i in gym.registry if i.startswith("tether_gym/")]
-    if env_id not in gym.registry:
-        close = difflib.get_close_matches(env_id, ids or list(gym.registry), n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
-        raise ConfigError(f"unknown env id {env_id!r}{hint}; tether_gym ids: {ids}")
 
 
 def _check_env_id(env_id: str) -> None:
@@ -383,7 +354,7 @@ def _resume_candidates(run_dir: Path) -> list[tuple[int, Path, Path, Path]]:
                       ckpt.parent / f"model_replay_buffer_{tag}_steps.pkl"))
     found = [(s if s is not None else -1, pri, m, st, b) for s, pri, m, st, b in found]
     found.sort(key=lambda c: (c[0], c[1]), reverse=True)
-    return [(s, m, st, b) for s, _, m, st, b in found]
+    return [(int(s or 0), m, st, b) for s, _, m, st, b in found]
 
 
 def _load_resume_point(run_dir, algo_cls, venv, eval_env, normalize: bool, tb_log: str):
@@ -499,8 +470,10 @@ def _callbacks(eval_env, out: Path, args, eval_freq: int, ckpt_freq: int, n_envs
                    training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)})
 
     class RunEvalCallback(EvalCallback):
-        """EvalCallback that also writes the best agent (safe format) and evaluates at the
-        very end."""
+        """EvalCallback that also writes the best agent (safe format).
+
+        It evaluates at the very end too, whatever the budget.
+        """
 
         def _on_step(self) -> bool:
             best = self.best_mean_reward

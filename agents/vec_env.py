@@ -70,7 +70,7 @@ def make_sb3_vec_env(num_envs: int = 1, seed: int | None = None,
     kwargs.setdefault("parallel", parallel)
     venv = gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point",
                         **kwargs)
-    env = TetherSB3VecEnv(venv, monitor=monitor)
+    env = TetherSB3VecEnv(venv, monitor=monitor)  # type: ignore[arg-type]
     if seed is not None:
         env.seed(seed)
     return env
@@ -104,12 +104,15 @@ class TetherSB3VecEnv(VecEnv):
 
     @property
     def config(self):
+        """The native env's EnvConfig."""
         return self.venv.config
 
     # ------------------------------------------------------------------ #
     def reset(self) -> np.ndarray:
-        """Reset every sub-env with the seeds of :meth:`seed` and the options of
-        :meth:`set_options` (both used once); return the observations."""
+        """Reset every sub-env; return the observations.
+
+        The seeds of :meth:`seed` and the options of :meth:`set_options` are used once.
+        """
         seeds = list(self._seeds)
         # sub-envs with equal options are reset together (each sub-env exactly once)
         groups: list[tuple[dict, np.ndarray]] = []
@@ -122,7 +125,7 @@ class TetherSB3VecEnv(VecEnv):
                 mask = np.zeros(self.num_envs, dtype=np.bool_)
                 mask[i] = True
                 groups.append((opts, mask))
-        obs = None
+        obs = np.empty(0)
         for opts, mask in groups:
             call_options = dict(opts)
             if len(groups) > 1:
@@ -137,8 +140,10 @@ class TetherSB3VecEnv(VecEnv):
         return obs
 
     def set_options(self, options: list[dict] | dict | None = None) -> None:
-        """Options for the next :meth:`reset`: one dict for every sub-env, or a list of
-        exactly ``num_envs`` dicts (None entries mean no options).
+        """Options for the next :meth:`reset`.
+
+        One dict for every sub-env, or a list of exactly ``num_envs`` dicts (None entries
+        mean no options).
 
         Raises
         ------
@@ -164,9 +169,11 @@ class TetherSB3VecEnv(VecEnv):
         super().set_options([dict(o or {}) for o in options])
 
     def step_async(self, actions: np.ndarray) -> None:
+        """Store the actions of the next :meth:`step_wait`."""
         self._actions = actions
 
     def step_wait(self) -> VecEnvStepReturn:
+        """Step every sub-env (SB3's protocol: auto-reset on the same step)."""
         if self._actions is None:
             raise RuntimeError("step_async() must be called before step_wait()")
         actions, self._actions = self._actions, None
@@ -195,13 +202,15 @@ class TetherSB3VecEnv(VecEnv):
         return obs, rewards.astype(np.float32), dones, info_list
 
     def close(self) -> None:
+        """Close the native env."""
         self.venv.close()
 
     # ------------------------------------------------------------------ #
     def get_images(self) -> Sequence[np.ndarray | None]:
+        """One rgb_array frame per sub-env (None without that render mode)."""
         if self.render_mode != "rgb_array":
             return [None] * self.num_envs
-        return list(self.venv.render())
+        return list(self.venv.render() or ())
 
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         """Attribute of each sub-env: the shared env's value (spaces: the single ones)."""

@@ -6,7 +6,7 @@ Importing the package registers ``tether_gym/TetherLibration-v0``. Heavy modules
 
 from gymnasium.envs.registration import register
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 __all__ = ["__version__", "ENV_ID", "DEFAULT_MAX_EPISODE_STEPS"]
 
 ENV_ID = "tether_gym/TetherLibration-v0"

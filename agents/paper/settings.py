@@ -3,15 +3,17 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 ORBIT = 2.0 * math.pi
 
-OPEN_LOOP_SETTINGS = {"control_step": 0.001, "physics_step": 0.001,
+OPEN_LOOP_SETTINGS: dict[str, Any] = {"control_step": 0.001, "physics_step": 0.001,
                       "reel_time_constant": 0.005, "accel_limit": None,
                       "max_reel_rate": 10.0}
 """Env arguments of the open-loop studies (no acceleration limit, as in the paper)."""
 
-PAPER_SMC_SETTINGS = {"control_step": 0.001, "physics_step": 0.001, "reel_time_constant": 0.001}
+PAPER_SMC_SETTINGS: dict[str, Any] = {"control_step": 0.001, "physics_step": 0.001,
+                                      "reel_time_constant": 0.001}
 """The paper's step for the sliding-mode run (Sec. 4.3: RK4, h = 0.001 rad)."""
 
 DEFAULT_SMC_SETTINGS: dict = {}

@@ -110,10 +110,10 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
     f6 = res["fig6"]
     a_min = min(f6, key=lambda k: f6[k]["swing_abs_quadrature"])
     slack = [k for k in f6 if f6[k]["failure"] == "slack"]
-    for a, paper_val in (("0.5", 0.1), ("0.9", 0.3)):
-        m = f6[a]
+    for amp, paper_val in (("0.5", 0.1), ("0.9", 0.3)):
+        m = f6[amp]
         rows.append(_row(
-            f"Fig. 6: length change magnitude over one orbit, e = 0.7, A = {a}",
+            f"Fig. 6: length change magnitude over one orbit, e = 0.7, A = {amp}",
             f"{paper_val:g}",
             f"max-min of l: {_fmt(m['swing_abs_quadrature'])} (max abs(l - l0) "
             f"{_fmt(m['max_dev_abs_quadrature'])})"

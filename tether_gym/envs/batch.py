@@ -305,7 +305,7 @@ class ChainBatch:
     # ------------------------------------------------------------------ #
     def info(self, b: int) -> dict:
         """The documented ``info`` dict of row b (floats and fresh (n,) arrays)."""
-        return info_dict(self.rows.info_s[:, b].tolist(), list(self.rows.info_v[:, b].copy()))
+        return info_dict(self.rows.info_s[:, b].tolist(), self.rows.info_v[:, b].copy())
 
     def info_arrays(self) -> dict:
         """Every row's :meth:`info` stacked: a dict of fresh (num, ...) arrays.

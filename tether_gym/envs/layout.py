@@ -15,6 +15,8 @@ and becomes its label (None while healthy) in the dict.
 
 from __future__ import annotations
 
+import operator
+
 import numpy as np
 
 from ..physics.layout import Field, Layout
@@ -75,17 +77,19 @@ N_INFO_VECTORS = len(_VECTORS)
 """Rows of the per-tether info buffer."""
 
 
-_ORDER = tuple((f.name, f.per_tether, getattr(INFO.index, f.name)[1 if f.per_tether else 0])
-               for f in INFO)
+_PICK = operator.itemgetter(*[
+    _SCALARS.index(f.name) if not f.per_tether else len(_SCALARS) + _VECTORS.index(f.name)
+    for f in INFO])
+"""Picks the INFO_KEYS order out of the scalar entries followed by the vector entries."""
 
 
 def info_dict(scalars, vectors) -> dict:
     """The ``info`` dict from the two buffers' entries of one env or of all (INFO_KEYS order).
 
-    ``scalars`` is a sequence of floats (or of (num,) arrays) and ``vectors`` of (n,)
+    ``scalars`` is a list of floats (or of (num,) arrays) and ``vectors`` a list of (n,)
     (or (num, n)) arrays, in the buffers' row order.
     """
-    info = {key: vectors[i] if per_tether else scalars[i] for key, per_tether, i in _ORDER}
+    info = dict(zip(INFO_KEYS, _PICK([*scalars, *vectors]), strict=True))
     code = info["failure"]
     info["failure"] = (_FAILURE_LABELS[int(code)] if isinstance(code, float)
                        else _FAILURE_LABELS[np.asarray(code, dtype=np.int64)])

@@ -202,7 +202,7 @@ class ThreadPolicy:
             self._start_probe()
         if self._plan:
             return self._plan.pop(0)
-        return self._choice
+        return SERIAL if self._choice is None else self._choice
 
     def _start_probe(self) -> None:
         # serial first: threads that just ran may still spin and slow a serial step

@@ -162,7 +162,7 @@ class TetherLibrationVectorEnv(VectorEnv):
         self._autoreset = np.zeros(self.num_envs, dtype=np.bool_)
         self._all_rows = np.arange(self.num_envs, dtype=np.int64)
         self._was_reset = np.zeros(self.num_envs, dtype=np.bool_)
-        self._renderer = None
+        self._renderer: Any = None
 
     # ------------------------------------------------------------------ #
     @property
@@ -175,22 +175,24 @@ class TetherLibrationVectorEnv(VectorEnv):
         """The nominal physics model (config's e and masses) for model-based controllers."""
         return self.config.model
 
-    @property
-    def np_random(self) -> tuple[np.random.Generator, ...]:
+    @property  # type: ignore[misc]
+    def np_random(self) -> tuple[np.random.Generator, ...]:  # type: ignore[override]
         """The sub-envs' generators (a random seed is drawn for any not yet seeded)."""
         return tuple(self._rng(i) for i in range(self.num_envs))
 
     @property
-    def np_random_seed(self) -> tuple[int, ...]:
+    def np_random_seed(self) -> tuple[int | None, ...]:  # type: ignore[override]
         """The sub-envs' seeds (as gymnasium's ``Env.np_random_seed``)."""
         for i in range(self.num_envs):
             self._rng(i)
         return tuple(self._seeds)
 
     def _rng(self, i: int) -> np.random.Generator:
-        if self._rngs[i] is None:
-            self._rngs[i], self._seeds[i] = seeding.np_random()
-        return self._rngs[i]
+        rng = self._rngs[i]
+        if rng is None:
+            rng, self._seeds[i] = seeding.np_random()
+            self._rngs[i] = rng
+        return rng
 
     def _n_chunks(self, rows: int) -> int:
         """Threads for the next step (one chunk of rows each), 0 for the serial step."""

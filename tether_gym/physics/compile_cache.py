@@ -164,7 +164,7 @@ class CacheState:
         """The directory holding the cache files of the functions of ``py_file``."""
         if self.kind == "package":
             return os.path.join(os.path.dirname(os.path.abspath(py_file)), "__pycache__")
-        return os.path.join(self.root, subpath)
+        return os.path.join(str(self.root), subpath)
 
 
 _STATE: CacheState | None = None
@@ -285,7 +285,7 @@ def install(package_dir: str = PACKAGE_DIR, version: str | None = None) -> Cache
         return _STATE
     if version is None:
         from .. import __version__ as version
-    stamp = source_stamp(package_dir, version)
+    stamp = source_stamp(package_dir, str(version))
     internals, reason = _caching_internals()
     kind = root = None
     tried: list[str] = []
@@ -325,4 +325,4 @@ def _disable_caching_for_package() -> None:
             original(self)
 
     enable_caching.__doc__ = original.__doc__
-    Dispatcher.enable_caching = enable_caching
+    Dispatcher.enable_caching = enable_caching  # type: ignore[method-assign]

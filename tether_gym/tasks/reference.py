@@ -114,8 +114,9 @@ def periodic_length_small_amplitude(nu, length0, e, amplitude):
 
 
 def tension_positivity_polynomial(e, amplitude):
-    """Sec. 3.2's condition for T^_{N-1} > 0 (the last tether at apogee,
-    docs/model.md#tension-positivity-sec-32).
+    """Sec. 3.2's condition for T^_{N-1} > 0 (the last tether at apogee).
+
+    (docs/model.md#tension-positivity-sec-32)
 
     6 - 12A + 6A^2 - 2A^3 - 6e + 15Ae - 12A^2 e + 4A^3 e - 3Ae^2 + 6A^2 e^2 - 2A^3 e^2;
     the paper requires it to be > 0.
