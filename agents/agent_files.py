@@ -30,7 +30,6 @@ by :func:`load_pickled_run`, behind an explicit ``allow_pickle=True``, and
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import warnings
@@ -38,6 +37,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from .jsonio import sha256_file, to_jsonable
 
 __all__ = ["AgentLoadError", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT", "FORMAT_VERSION",
            "save_agent", "load_agent", "load_pickled_run", "convert_run", "is_unit",
@@ -163,27 +164,6 @@ def _safetensors():
     return safetensors.torch
 
 
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
-def _jsonable(value):
-    """Tuples to lists and numpy scalars/arrays to Python values (for JSON and YAML)."""
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, np.generic):
-        return value.item()
-    return value
-
-
 # ---------------------------------------------------------------------- save
 def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
                epsilon: float = 1e-8, env_id: str | None = None,
@@ -241,9 +221,9 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
         "action_space": _space_to_json(policy.action_space),
         "obs_normalization": norm,
         "weights": {"file": WEIGHTS_FILE, "module": _WEIGHTS_MODULE[algo],
-                    "sha256": _sha256(weights)},
-        "env": {"id": env_id, "kwargs": _jsonable(env_kwargs or {})},
-        "training": _jsonable(training or {}),
+                    "sha256": sha256_file(weights)},
+        "env": {"id": env_id, "kwargs": to_jsonable(env_kwargs or {})},
+        "training": to_jsonable(training or {}),
         "versions": _versions(),
     }
     text = json.dumps(meta, indent=1, allow_nan=False)
@@ -327,7 +307,7 @@ def load_agent(path):
     weights = path / Path(str(weights_info["file"])).name
     if not weights.is_file():
         raise AgentLoadError(f"agent {path} is incomplete: weights file {weights.name} is missing")
-    if _sha256(weights) != weights_info["sha256"]:
+    if sha256_file(weights) != weights_info["sha256"]:
         raise AgentLoadError(f"{weights} does not match the SHA-256 recorded in {meta_path} "
                              "(truncated or modified)")
     obs_space = _space_from_json(meta["observation_space"], f"{meta_path}: observation_space")

@@ -17,7 +17,6 @@ so that anyone can recompute the statistics from ``episodes``.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import math
 import platform
@@ -25,8 +24,7 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
-import numpy as np
-
+from .jsonio import sha256_file, to_jsonable
 from .metrics import FAILURES, HIGHER_IS_BETTER, METRICS
 from .stats import (
     BOOTSTRAP_SEED,
@@ -56,38 +54,11 @@ PACKAGES = ("tether_gym", "numpy", "scipy", "gymnasium", "numba", "torch",
             "stable-baselines3", "matplotlib")
 
 
-def to_jsonable(x):
-    """``x`` with numpy scalars/arrays as Python values, tuples as lists, NaN/inf as None."""
-    if isinstance(x, dict):
-        return {str(k): to_jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [to_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return to_jsonable(x.tolist())
-    if isinstance(x, (bool, np.bool_)):
-        return bool(x)
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (float, np.floating)):
-        return float(x) if math.isfinite(x) else None
-    if isinstance(x, Path):
-        return str(x)
-    return x
-
-
-def _sha256(path: Path) -> str:
-    digest = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
-
-
 def agent_files(path: Path) -> dict:
     """``{file name: sha256}`` of an agent: the file itself, or a run folder's files."""
     path = Path(path)
     files = [path] if path.is_file() else sorted(p for p in path.iterdir() if p.is_file())
-    return {p.name: _sha256(p) for p in files}
+    return {p.name: sha256_file(p) for p in files}
 
 
 def display_path(path) -> str:

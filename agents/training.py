@@ -34,8 +34,9 @@ import gymnasium as gym
 
 import tether_gym
 
-from .agent_files import _jsonable, save_agent
+from .agent_files import save_agent
 from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
+from .jsonio import to_jsonable
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
            "plot_learning_curve", "ConfigError", "CONFIG_DIR"]
@@ -163,7 +164,7 @@ def resolve_env_kwargs(config_kwargs: dict, user_kwargs: dict, source: str,
                 notes.append(f"--env-kwargs {key}={user_kwargs[key]!r} clears {source}'s "
                              f"{range_key}: {config_kwargs[range_key]!r}")
                 del config_kwargs[range_key]
-    kwargs = _jsonable({**config_kwargs, **user_kwargs})
+    kwargs = to_jsonable({**config_kwargs, **user_kwargs})
     n_bodies = kwargs.get("n_bodies", default_n_bodies)
     if isinstance(n_bodies, int) and not isinstance(n_bodies, bool) and n_bodies >= 2:
         n = n_bodies - 1
@@ -321,7 +322,7 @@ def _yaml_dump(data) -> str:
         def ignore_aliases(self, data):
             return True
 
-    return yaml.dump(_jsonable(data), Dumper=_NoAliases, sort_keys=False)
+    return yaml.dump(to_jsonable(data), Dumper=_NoAliases, sort_keys=False)
 
 
 # ---------------------------------------------------------------------- resume
