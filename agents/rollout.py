@@ -105,9 +105,8 @@ def _settings(cfg) -> dict:
 def make_vector_env(num_envs: int, env_kwargs: dict | None = None):
     """The native vector env of the rollouts.
 
-    ``max_episode_steps`` defaults to -1 (no step cap): an episode ends when the env's
-    own configuration says so (``orbits_per_episode``), so lengthened episodes are not
-    cut at the registered 754 steps. Pass ``max_episode_steps`` in ``env_kwargs`` to cap.
+    An episode ends when the env's own configuration says so (``orbits_per_episode``);
+    pass ``max_episode_steps`` in ``env_kwargs`` to cap it at a step count.
     """
     kwargs = dict(env_kwargs or {})
     kwargs.setdefault("max_episode_steps", -1)

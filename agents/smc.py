@@ -62,6 +62,10 @@ class SlidingModeController(ReelRatePolicy):
         model-mismatch studies.
         """
         base = env.unwrapped if hasattr(env, "unwrapped") else env
+        if not hasattr(base, "config") or not hasattr(base, "model"):
+            raise TypeError(f"env must be a TetherLibration env (gym.make("
+                            f"'tether_gym/TetherLibration-v0') or its vector env), got "
+                            f"{type(env).__name__}")
         layout = ObservationLayout.from_env(base)
         model = nominal if nominal is not None else base.model
         return cls(model, layout, c=c, k=k, eps=eps, **kwargs)

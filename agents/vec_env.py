@@ -57,7 +57,8 @@ def make_sb3_vec_env(num_envs: int = 1, seed: int | None = None,
         ``make_vec_env`` convention); None draws random seeds.
     env_kwargs : dict or None
         Keyword arguments of the env (see ``TetherLibrationEnv``), plus
-        ``max_episode_steps`` (the registered 754 by default; -1 for none).
+        ``max_episode_steps`` (a step cap; none by default, the env truncates itself
+        after ``orbits_per_episode``).
     monitor : bool
         Report Monitor-style ``"episode"`` infos (see the module docstring); off by
         default: wrap in ``VecMonitor`` instead.

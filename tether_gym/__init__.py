@@ -11,13 +11,16 @@ __all__ = ["__version__", "ENV_ID", "DEFAULT_MAX_EPISODE_STEPS"]
 
 ENV_ID = "tether_gym/TetherLibration-v0"
 
-# ceil(orbits_per_episode * 2 pi / control_step) for the defaults (3 orbits, 0.025 rad);
-# tests/envs check it against EnvConfig().max_episode_steps.
 DEFAULT_MAX_EPISODE_STEPS = 754
+"""Control steps of an episode with the default arguments (3 orbits of 0.025 rad steps).
+
+Informational: the env truncates itself after ``orbits_per_episode`` orbits of true
+anomaly, whatever its configuration, so no step limit is registered (a registered one
+would cut lengthened episodes, e.g. ``orbits_per_episode=6`` or ``control_step=0.01``).
+"""
 
 register(
     id=ENV_ID,
     entry_point="tether_gym.envs.tether_libration:TetherLibrationEnv",
     vector_entry_point="tether_gym.envs.vector:TetherLibrationVectorEnv",
-    max_episode_steps=DEFAULT_MAX_EPISODE_STEPS,
 )

@@ -112,10 +112,22 @@ def check_range(
 
 
 def as_float_tuple(name: str, value, length: int | None = None) -> tuple[float, ...]:
-    """Convert a sequence to a tuple of finite floats, checking its length."""
+    """Convert a sequence to a tuple of finite floats, checking its length.
+
+    Raises TypeError naming ``name`` for anything but a sequence of real numbers (bools,
+    strings and complex numbers included).
+    """
     if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
         raise TypeError(f"{name} must be a sequence of numbers, got {type(value).__name__}")
-    arr = np.asarray(value, dtype=float)
+    try:
+        raw = np.asarray(value)
+    except ValueError as exc:  # ragged nesting
+        raise ValueError(f"{name}={value!r} must be a flat sequence of numbers: {exc}") from None
+    if raw.dtype.kind not in "iuf" or any(
+            isinstance(x, (bool, np.bool_)) for x in np.ravel(np.asarray(value, dtype=object))):
+        raise TypeError(f"{name}={value!r} must hold real numbers (no bools, strings or "
+                        "complex numbers)")
+    arr = raw.astype(float)
     if arr.ndim != 1:
         raise ValueError(f"{name}={value!r} must be one-dimensional, got shape {arr.shape}")
     if length is not None and arr.shape[0] != length:

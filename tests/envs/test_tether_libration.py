@@ -72,10 +72,12 @@ def test_spaces(make_env):
     assert env_r.observation_space.shape == (4 * 3 + 4 + 4,)
 
 
-def test_registered_time_limit(make_env):
+def test_no_registered_time_limit(make_env):
+    """The env truncates itself after orbits_per_episode; a registered limit would cut
+    lengthened episodes (tests/envs/test_contract.py)."""
     env = make_env()
-    assert env.spec.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS == 754
-    assert env.unwrapped.max_episode_steps == 754
+    assert env.spec.max_episode_steps is None
+    assert env.unwrapped.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS == 754
     assert env.spec.vector_entry_point == "tether_gym.envs.vector:TetherLibrationVectorEnv"
 
 
@@ -309,7 +311,8 @@ def test_env_truncates_itself(make_env, nu0):
     ({"length": [np.nan, 0.5]}, ValueError, r"options\['length'\]=\[nan, 0\.5\] must be finite"),
     ({"dtheta": [np.inf, 0.0]}, ValueError, r"options\['dtheta'\]=\[inf, 0\.0\] must be finite"),
     ({"theta": [1.6, 0.0]}, ValueError, r"options\['theta'\]=\[1\.6, 0\.0\] must lie in"),
-    ({"length": [0.0, 0.5]}, ValueError, r"options\['length'\]=\[0\.0, 0\.5\] must be > 0"),
+    ({"length": [0.0, 0.5]}, ValueError,
+     r"options\['length'\]=\[0\.0, 0\.5\] must lie inside length_bounds"),
     ([("nu", 0.0)], TypeError, r"options must be a dict or None, got list"),
 ])
 def test_bad_options_raise(make_env, options, exc, match):

@@ -94,8 +94,8 @@ def test_make_vec_builds_the_native_env_without_warnings():
     assert env.observation_space.dtype == np.float32
     assert env.num_envs == 3
     assert env.spec.id == ENV_ID
-    # make_vec passes the registered step limit, as gym.make's TimeLimit uses it
-    assert env.unwrapped.max_episode_steps == tether_gym.DEFAULT_MAX_EPISODE_STEPS
+    # no step limit is registered: the env truncates itself after orbits_per_episode
+    assert env.unwrapped.max_episode_steps is None
     obs, info = env.reset(seed=0)
     assert env.observation_space.contains(obs)
     obs, *_ = env.step(env.action_space.sample())

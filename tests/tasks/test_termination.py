@@ -31,4 +31,5 @@ def test_failure_codes(y, tension, expected):
 
 def test_labels():
     assert Failure.NONE.label is None
-    assert [f.label for f in Failure][1:] == ["nonfinite", "slack", "tumble", "length"]
+    assert [f.label for f in Failure][1:] == ["nonfinite", "slack", "tumble", "length",
+                                              "diverged"]

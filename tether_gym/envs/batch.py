@@ -28,14 +28,30 @@ from .config import EnvConfig
 from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
 from .step_kernel import Rows, StepConfig, new_row_work, step_rows
 
-__all__ = ["ChainBatch", "RESET_OPTION_KEYS"]
+__all__ = ["ChainBatch", "RESET_OPTION_KEYS", "check_options"]
 
 RESET_OPTION_KEYS = ("nu",) + STATE.names
 """Keys of ``reset(options=...)``: the true anomaly and every state field."""
 
 
-def _check_options(options, n):
-    """Validate reset options; return a dict of float arrays (or float for nu)."""
+OPTION_BOUNDS = {"nu": 1.0e4, "dtheta": 10.0, "dlength": 10.0}
+"""Largest magnitude of the unbounded reset options [rad, rad/rad, -]."""
+
+MAX_RESET_DRAWS = 100
+"""Draws per row before a configuration whose initial states all fail is rejected."""
+
+
+def check_options(options, config: EnvConfig) -> dict:
+    """Validate reset options; return a dict of float arrays (or a float for nu).
+
+    Raises
+    ------
+    TypeError
+        If ``options`` is not a dict or a value is not real numbers (bools included).
+    ValueError
+        On an unknown key, a wrong shape, NaN/inf or a value outside its range: theta in
+        (-pi/2, pi/2), length inside ``length_bounds``, the others within OPTION_BOUNDS.
+    """
     if options is None:
         return {}
     if not isinstance(options, dict):
@@ -44,9 +60,14 @@ def _check_options(options, n):
     if unknown:
         raise ValueError(f"unknown reset option(s) {unknown}; "
                          f"valid keys: {list(RESET_OPTION_KEYS)}")
+    n = config.n_tethers
     out = {}
     for key, value in options.items():
-        arr = np.asarray(value, dtype=float)
+        raw = np.asarray(value)
+        if raw.dtype.kind not in "iuf":
+            raise TypeError(f"options[{key!r}]={value!r} must be real numbers, got dtype "
+                            f"{raw.dtype}")
+        arr = raw.astype(float)
         if key == "nu":
             if arr.shape != ():
                 raise ValueError(f"options['nu']={value!r} must be a scalar [rad]")
@@ -54,11 +75,16 @@ def _check_options(options, n):
             raise ValueError(f"options[{key!r}]={value!r} must have shape ({n},), got {arr.shape}")
         if not np.all(np.isfinite(arr)):
             raise ValueError(f"options[{key!r}]={value!r} must be finite")
+        bound = OPTION_BOUNDS.get(key)
+        if bound is not None and np.any(np.abs(arr) > bound):
+            raise ValueError(f"options[{key!r}]={value!r} must lie in [-{bound:g}, {bound:g}]")
         out[key] = arr
     if "theta" in out and np.any(np.abs(out["theta"]) >= 0.5 * np.pi):
         raise ValueError(f"options['theta']={options['theta']!r} must lie in (-pi/2, pi/2)")
-    if "length" in out and np.any(out["length"] <= 0):
-        raise ValueError(f"options['length']={options['length']!r} must be > 0")
+    lo, hi = config.episode.length_bounds
+    if "length" in out and not np.all((out["length"] > lo) & (out["length"] < hi)):
+        raise ValueError(f"options['length']={options['length']!r} must lie inside "
+                         f"length_bounds=({lo:g}, {hi:g})")
     return out
 
 
@@ -157,14 +183,62 @@ class ChainBatch:
         ``rows`` is a sequence of row indices and ``rngs[b]`` row b's generator. Each
         row draws from its own generator in the single env's order (e, the masses,
         then theta, theta', l as one draw of 3n uniforms, then the observation noise);
-        everything after the draws is computed for all the rows at once.
+        everything after the draws is computed for all the rows at once. A row whose
+        drawn initial state is already failed (slack, tumbled or a length out of bounds)
+        draws again from its generator, up to MAX_RESET_DRAWS times.
+
+        Raises
+        ------
+        ValueError
+            If the options fix a failed initial state, or a row's draws keep failing
+            (the configuration's ranges reach into the failure bounds).
         """
+        opts = check_options(options, self.config)
+        rows = np.asarray(rows, dtype=np.int64)
+        for _ in range(MAX_RESET_DRAWS):
+            self._draw_rows(rows, rngs, opts)
+            failed = rows[self._failed_at_start(rows)]
+            if failed.size == 0:
+                return
+            if set(opts) & set(STATE.names):
+                b = int(failed[0])
+                raise ValueError(f"reset options {options!r} give a failed initial state: "
+                                 f"{self._start_failure(b)}")
+            rows = failed  # redraw those rows from their generators, within the ranges
+        raise ValueError(f"the configuration starts failed: {len(rows)} row(s) still failed "
+                         f"after {MAX_RESET_DRAWS} draws each, e.g. "
+                         f"{self._start_failure(int(rows[0]))}; narrow the init_*_range "
+                         "arguments or move initial_theta / initial_lengths away from the "
+                         "failure bounds")
+
+    def _failed_at_start(self, rows: np.ndarray) -> np.ndarray:
+        """Mask of the listed rows whose initial state is non-finite or failed."""
+        r = self.rows
+        n = self.n
+        sl = STATE.slices(n)
+        y = r.y[rows]
+        lo, hi = self.config.episode.length_bounds
+        length = y[:, sl["length"]]
+        tension = r.tension[rows]
+        return (~np.isfinite(y).all(axis=1) | ~np.isfinite(tension).all(axis=1)
+                | (tension <= 0.0).any(axis=1)
+                | (np.abs(y[:, sl["theta"]]) >= 0.5 * np.pi).any(axis=1)
+                | ((length < lo) | (length > hi)).any(axis=1))
+
+    def _start_failure(self, b: int) -> str:
+        """Why row b's initial state fails, in words."""
+        sl = STATE.slices(self.n)
+        y = self.rows.y[b]
+        return (f"theta={y[sl['theta']].round(4).tolist()}, "
+                f"l={y[sl['length']].round(4).tolist()}, "
+                f"T^={self.rows.tension[b].round(4).tolist()}")
+
+    def _draw_rows(self, rows: np.ndarray, rngs, opts: dict) -> None:
+        """One draw of the listed rows' parameters and initial states, then their start."""
         cfg = self.config
         rnd = cfg.randomisation
         mass_range = 0.0 if rnd.mass_range is None else rnd.mass_range
         n = self.n
-        opts = _check_options(options, n)
-        rows = np.asarray(rows, dtype=np.int64)
         count = rows.shape[0]
         ecc = np.full(count, cfg.eccentricity)
         scale = np.ones((count, n)) if rnd.mass_range is not None else None
@@ -195,10 +269,12 @@ class ChainBatch:
                   dref + unit[:, n:2 * n] * rnd.init_dtheta_range)
         length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
                   np.asarray(cfg.initial_lengths) + unit[:, 2 * n:] * rnd.init_length_range)
-        # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference.
-        dlength = (np.broadcast_to(opts["dlength"], shape) if "dlength" in opts else
-                   periodic_reel_rate(nu0, ref, dref, length, ecc[:, None], cfg.amplitude,
-                                      cfg.frequency))
+        # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference
+        # (infinite where theta_d' = -1: such a start is refused below)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            dlength = (np.broadcast_to(opts["dlength"], shape) if "dlength" in opts else
+                       periodic_reel_rate(nu0, ref, dref, length, ecc[:, None], cfg.amplitude,
+                                          cfg.frequency))
         r.nu[rows] = nu0
         r.nu_end[rows] = nu0 + cfg.episode_length
         fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}

@@ -37,6 +37,16 @@ __all__ = ["EnvConfig", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
 PAPER_INITIAL_THETA = 0.1
 """theta_1(0) [rad] of the paper's Sec. 4.3 case (the other tethers start at 0)."""
 
+MAX_BODIES = 20
+"""Largest N: the default lengths 1/(N-1) must stay inside the default length bounds."""
+MIN_STEP = 1.0e-4
+"""Smallest control and physics step [rad] (60,000 steps per orbit)."""
+MAX_INITIAL_NU = 1.0e4
+"""Largest |initial_nu| [rad] (about 1,600 orbits)."""
+MAX_LENGTH_RATIO = 0.1
+"""Largest L0 / p [-]: the chain must be short against the orbit radius (the gravity
+models expand in, or are exact for, a body near the main satellite)."""
+
 
 def _opt_range(name, value, low, high):
     if value is None:
@@ -96,15 +106,15 @@ class Episode:
     length_bounds: tuple[float, float] = (0.05, 1.5)
 
     def __post_init__(self) -> None:
-        check_range("initial_nu", self.initial_nu)
+        check_range("initial_nu", self.initial_nu, -MAX_INITIAL_NU, MAX_INITIAL_NU)
         if self.initial_theta is not None:
             theta0 = as_float_tuple("initial_theta", self.initial_theta)
             if max(abs(t) for t in theta0) >= 0.5 * math.pi:
                 raise ValueError(f"initial_theta={self.initial_theta!r} must lie in "
                                  "(-pi/2, pi/2)")
             object.__setattr__(self, "initial_theta", theta0)
-        check_range("control_step", self.control_step, 0.0, 1.0, low_open=True)
-        check_range("physics_step", self.physics_step, 0.0, self.control_step, low_open=True)
+        check_range("control_step", self.control_step, MIN_STEP, 1.0)
+        check_range("physics_step", self.physics_step, MIN_STEP, self.control_step)
         ratio = self.control_step / self.physics_step
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
             raise ValueError(f"control_step={self.control_step!r} must be a whole multiple of "
@@ -247,8 +257,9 @@ class EnvConfig:
         if isinstance(n_bodies, bool) or not isinstance(n_bodies, (int, np.integer)):
             raise TypeError(f"n_bodies must be an int, got {type(n_bodies).__name__} "
                             f"{n_bodies!r}")
-        if n_bodies < 2:
-            raise ValueError(f"n_bodies={n_bodies!r} must be >= 2 (one tether or more)")
+        if not 2 <= n_bodies <= MAX_BODIES:
+            raise ValueError(f"n_bodies={n_bodies!r} must be in [2, {MAX_BODIES}] (one tether "
+                             "or more)")
         n = int(n_bodies) - 1
         given = dict(kwargs)
         # chain defaults that depend on N
@@ -273,6 +284,12 @@ class EnvConfig:
         return config
 
     def __post_init__(self) -> None:
+        ratio = self.scales.length_ratio
+        if ratio > MAX_LENGTH_RATIO:
+            raise ValueError(f"total_tether_length / semi_latus_rectum = {ratio:g} (L0="
+                             f"{self.chain.total_tether_length!r}, p="
+                             f"{self.orbit.semi_latus_rectum!r}) must be <= "
+                             f"{MAX_LENGTH_RATIO:g}: the chain must be short against the orbit")
         if self.chain.n_tethers != self.n_bodies - 1:
             raise ValueError(f"n_bodies={self.n_bodies!r} needs {self.n_bodies - 1} masses, got "
                              f"masses={self.chain.masses!r}")

@@ -27,7 +27,7 @@ from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
 from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import PENALTIES, RewardParams, penalty_terms, reward_terms
-from ..tasks.termination import failure_code
+from ..tasks.termination import KEEP_PREVIOUS, failure_code
 from .layout import I, O
 
 __all__ = ["StepConfig", "Rows", "RowWork", "make_row_work", "step_rows"]
@@ -158,7 +158,8 @@ def _task(b, cfg, work, rows):
     par = rows.par[b] if rows.par.shape[0] > 1 else rows.par[0]
     code = failure_code(y, rows.tension_min[b], cfg.length_min, cfg.length_max)
     rows.failure[b] = code
-    if code == 1:  # non-finite: keep the last finite state, lowest reward
+    if code == KEEP_PREVIOUS[0] or code == KEEP_PREVIOUS[1]:
+        # non-finite or diverged: keep the last healthy state, lowest reward
         for i in range(y.shape[0]):
             y[i] = work.previous[i]
         for c in range(rows.components.shape[1]):

@@ -38,7 +38,11 @@ def check_action(action, n: int) -> np.ndarray:
 
     NaN and inf are rejected by the step itself, before it changes anything.
     """
-    a = np.asarray(action, dtype=np.float64)
+    raw = np.asarray(action)
+    if raw.dtype.kind not in "iuf":
+        raise TypeError(f"action={action!r} must hold real numbers (no bools or complex), "
+                        f"got dtype {raw.dtype}")
+    a = raw.astype(np.float64, copy=False)
     if a.shape != (n,):
         raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
     return np.ascontiguousarray(a.reshape(1, n))
@@ -120,12 +124,13 @@ class TetherLibrationEnv(gym.Env):
     *Terminated* (``info["failure"]`` names the reason, None while healthy):
     ``"slack"`` any T^_i <= 0 at a physics substep boundary of the step;
     ``"tumble"`` any |theta_i| >= pi/2; ``"length"`` any l_i outside
-    ``length_bounds``; ``"nonfinite"`` a non-finite state (the last finite state is
-    kept in the observation and the reward is 0).
+    ``length_bounds``; ``"nonfinite"`` a NaN or inf state, ``"diverged"`` a state or
+    tension beyond +-1e6 (in both cases the last healthy state is kept in the
+    observation, which is always finite, and the reward is 0).
     *Truncated* only by the time limit: after ``orbits_per_episode`` orbits of true
-    anomaly (the registered ``max_episode_steps`` equals that step count for the
-    default arguments; pass ``max_episode_steps=-1`` to ``gym.make`` when you lengthen
-    episodes, the env truncates itself).
+    anomaly, whatever the configuration (``max_episode_steps``: 754 steps with the
+    defaults). No step limit is registered, so ``gym.make`` adds no TimeLimit that could
+    cut a lengthened episode; ``gym.make(..., max_episode_steps=k)`` still adds one.
 
     ## Arguments
 

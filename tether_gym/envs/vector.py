@@ -19,7 +19,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..physics import TetherChain
-from .batch import ChainBatch, _check_options
+from .batch import ChainBatch, check_options
 from .config import EnvConfig
 from .tether_libration import action_space, eccentricity_of, observation_space
 from .threads import ThreadPolicy
@@ -100,10 +100,9 @@ class TetherLibrationVectorEnv(VectorEnv):
 
     As in the single env: terminated on a failure (``info["failure"]``), truncated
     after ``orbits_per_episode`` orbits. ``max_episode_steps`` plays the role of the
-    TimeLimit wrapper that ``gym.make`` adds to the single env: ``gym.make_vec`` passes
-    the registered value (754), a sub-env is also truncated when its step count
-    reaches it, and None or -1 (``gym.make_vec(..., max_episode_steps=-1)``) turns it
-    off. With the defaults both limits fall on the same step.
+    TimeLimit wrapper ``gym.make(..., max_episode_steps=k)`` adds to a single env: off
+    by default (no step limit is registered), a sub-env is also truncated when its step
+    count reaches k when given (None or -1 turn it off).
 
     ## Infos
 
@@ -212,7 +211,7 @@ class TetherLibrationVectorEnv(VectorEnv):
         mask = None
         if "reset_mask" in options:
             mask = _check_reset_mask(options.pop("reset_mask"), self.num_envs)
-        _check_options(options or None, self.n_tethers)  # fail before touching any row
+        check_options(options or None, self.config)  # fail before touching any row
         rows = self._all_rows if mask is None else np.flatnonzero(mask)
         batch = self._batch
         for i in rows.tolist():
@@ -231,7 +230,11 @@ class TetherLibrationVectorEnv(VectorEnv):
                                f"{np.flatnonzero(~self._was_reset).tolist()} were never reset")
         batch = self._batch
         n = self.n_tethers
-        a = np.ascontiguousarray(actions, dtype=np.float64)
+        raw = np.asarray(actions)
+        if raw.dtype.kind not in "iuf":
+            raise TypeError(f"actions must hold real numbers (no bools or complex), got dtype "
+                            f"{raw.dtype}")
+        a = np.ascontiguousarray(raw, dtype=np.float64)
         if a.shape != (self.num_envs, n):
             raise ValueError(f"actions must have shape ({self.num_envs}, {n}) (num_envs, N-1), "
                              f"got {a.shape}: {actions!r}")

@@ -28,6 +28,12 @@ from .state import PARAMS, STATE, mass_fractions, pack_params, tail_masses
 
 __all__ = ["TetherChain", "Transition", "transition"]
 
+MIN_LENGTH = 1.0e-6
+"""Shortest tether length l = L / L0 [-] the model evaluates (the equations divide by l)."""
+MAX_MAGNITUDE = 1.0e6
+"""Largest |value| of any state entry [-]: beyond it the results are not physics (the
+terms grow like l^2 or 1/l and overflow to NaN)."""
+
 
 class TetherChain:
     """Planar chain of N-1 point masses hanging from a heavy satellite on a Kepler orbit.
@@ -117,8 +123,13 @@ class TetherChain:
         for name, a in zip(("nu",) + names, [nu] + arrs, strict=False):
             if not np.all(np.isfinite(a)):
                 raise ValueError(f"{name}={a!r} must be finite (no NaN or inf)")
-        if np.any(arrs[2] <= 0.0):
-            raise ValueError(f"length={arrs[2]!r} must be > 0")
+        if np.any(arrs[2] < MIN_LENGTH) or np.any(arrs[2] > MAX_MAGNITUDE):
+            raise ValueError(f"length={arrs[2]!r} must lie in [{MIN_LENGTH:g}, "
+                             f"{MAX_MAGNITUDE:g}] (l = L / L0 [-])")
+        for name, a in zip(("nu",) + names, [nu] + arrs, strict=False):
+            if np.any(np.abs(a) > MAX_MAGNITUDE):
+                raise ValueError(f"{name}={a!r} must lie in [-{MAX_MAGNITUDE:g}, "
+                                 f"{MAX_MAGNITUDE:g}]")
         size = int(np.prod(lead))
         flat_nu = np.ascontiguousarray(np.broadcast_to(nu, lead).reshape(size))
         flat = [np.ascontiguousarray(np.broadcast_to(a, lead + (n,)).reshape(size, n))

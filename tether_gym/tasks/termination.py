@@ -29,6 +29,7 @@ class Failure(IntEnum):
     SLACK = 2
     TUMBLE = 3
     LENGTH = 4
+    DIVERGED = 5
 
     def __str__(self) -> str:
         return self.name.lower()
@@ -39,11 +40,21 @@ class Failure(IntEnum):
         return None if self is Failure.NONE else str(self)
 
 
+DIVERGENCE_BOUND = 1.0e6
+"""|y_i| or |T^_i| beyond this [-] is a diverged integration, not a physical state: a
+healthy chain keeps every entry of order one (and an entry beyond float32's range would
+turn into inf in the observation)."""
+
+KEEP_PREVIOUS = (int(Failure.NONFINITE), int(Failure.DIVERGED))
+"""Codes after which the env keeps the last healthy state (and gives the lowest reward)."""
+
+
 @njit(**INLINE)
 def failure_code(y, tension_min, length_min, length_max):
     """Failure code of one state row y = [theta, theta', l, l'] (checked in this order).
 
     * NONFINITE: any entry of y or of the tensions is NaN or inf;
+    * DIVERGED: any entry of y or of the tensions beyond +-DIVERGENCE_BOUND;
     * SLACK: any T^_i <= 0 at a substep boundary of the last control step;
     * TUMBLE: any |theta_i| >= pi/2;
     * LENGTH: any l_i outside [length_min, length_max].
@@ -55,6 +66,12 @@ def failure_code(y, tension_min, length_min, length_max):
     for j in range(n):
         if not math.isfinite(tension_min[j]):
             return 1
+    for i in range(y.shape[0]):
+        if abs(y[i]) > DIVERGENCE_BOUND:
+            return 5
+    for j in range(n):
+        if abs(tension_min[j]) > DIVERGENCE_BOUND:
+            return 5
     for j in range(n):
         if tension_min[j] <= 0.0:
             return 2
