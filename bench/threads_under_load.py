@@ -11,6 +11,11 @@ the same condition. Workers get ``NUMBA_NUM_THREADS`` = the number of cores (the
 user gets by default), random actions drawn in advance, autoresets included. Each cell
 is the best of ``--rounds`` interleaved rounds (other processes can only slow a round
 down); on a shared machine the figures are indicative only.
+
+``threads`` is also what ``auto`` did before :mod:`tether_gym.envs.threads` (threads
+from 128 envs on, 4 chunks per thread), so its row is the "before" figure and ``auto``
+the "after" one. ``--layer`` and environment variables such as ``OMP_WAIT_POLICY``
+(passed on to the workers) try other numba threading set-ups.
 """
 
 from __future__ import annotations
@@ -52,7 +57,7 @@ def worker(mode: str, num_envs: int, seconds: float, start_at: float) -> dict:
             break
     out = {"mode": mode, "env_steps_per_s": steps * num_envs / elapsed}
     chooser = getattr(env.unwrapped, "_threads", None)
-    if chooser is not None:
+    if chooser is not None and chooser.probes:
         out["chooser"] = chooser.summary()
     env.close()
     return out

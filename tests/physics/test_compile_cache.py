@@ -131,6 +131,16 @@ def test_cache_dir_order_and_fallbacks(tmp_path):
     assert writable(str(tmp_path / "new" / "dir")) and not writable(str(blocker / "x"))
 
 
+def test_a_user_locator_override_is_warned_about():
+    """NUMBA_CACHE_LOCATOR_CLASSES bypasses the package-wide key: say so (import only)."""
+    env = {**os.environ, "NUMBA_CACHE_LOCATOR_CLASSES": "InTreeCacheLocator"}
+    out = subprocess.run([sys.executable, "-c", "import tether_gym.physics"], env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stderr.count("CompileCacheWarning") == 1
+    assert "NUMBA_CACHE_LOCATOR_CLASSES is set" in out.stderr
+
+
 # ---------------------------------------------------------------------- message
 def fake_event(func, start: bool):
     dispatcher = SimpleNamespace(py_func=func)

@@ -306,6 +306,13 @@ def install(package_dir: str = PACKAGE_DIR, version: str | None = None) -> Cache
             f"tether_gym: {reason}; its numba kernels are compiled in memory by every "
             f"process ({COMPILE_HINT} each time). To cache them, {fix}.",
             CompileCacheWarning, stacklevel=2)
+    elif os.environ.get("NUMBA_CACHE_LOCATOR_CLASSES"):
+        warnings.warn(
+            "tether_gym: NUMBA_CACHE_LOCATOR_CLASSES is set, so numba caches tether_gym's "
+            "kernels with those locators, keyed on each function's own file: after an "
+            "edit of a helper that a kernel inlines from another file, or an upgrade, a "
+            "stale compiled kernel can run. Unset it to key them on the package source.",
+            CompileCacheWarning, stacklevel=2)
     event.register("numba:compile", _CompileAnnouncer(_STATE))
     return _STATE
 
