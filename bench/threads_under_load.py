@@ -12,10 +12,10 @@ user gets by default), random actions drawn in advance, autoresets included. Eac
 is the best of ``--rounds`` interleaved rounds (other processes can only slow a round
 down); on a shared machine the figures are indicative only.
 
-``threads`` is also what ``auto`` did before :mod:`tether_gym.envs.threads` (threads
-from 128 envs on, 4 chunks per thread), so its row is the "before" figure and ``auto``
-the "after" one. ``--layer`` and environment variables such as ``OMP_WAIT_POLICY``
-(passed on to the workers) try other numba threading set-ups.
+For a before/after comparison run the script once more with an older tree on
+``PYTHONPATH`` (tether_gym 0.1.0 stepped its threads with numba's OpenMP ``prange``,
+from 128 envs on by default). ``--layer`` and environment variables such as
+``OMP_WAIT_POLICY`` (passed on to the workers) try other numba threading set-ups.
 """
 
 from __future__ import annotations

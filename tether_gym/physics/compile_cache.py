@@ -49,7 +49,7 @@ __all__ = ["CompileCacheWarning", "CacheState", "install", "state", "source_stam
 PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 """The tether_gym package directory (the one holding ``__init__.py``)."""
 
-COMPILE_HINT = "~10-20 s"
+COMPILE_HINT = "~5-10 s on an idle core"
 """How long a cold compile of the env kernels takes (shown in the compile message)."""
 
 
