@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.fanout import RAY_PIP, RunState, init_ray, run_state, seed_argv
+from tether_gym_agents.fanout import RAY_PIP, RunState, run_state, seed_argv
 from tether_gym_agents.training import _build_parser, main
 
 # 2 envs x n_steps 128 (the tiny config): one PPO update per 256 steps, three in TARGET
@@ -49,15 +49,6 @@ def tiny(tmp_path_factory):
         "normalize": {"norm_obs": True, "norm_reward": True},
         "policy_kwargs": {"net_arch": [16, 16]}}}))
     return [*TINY, "--config", str(path)]
-
-
-@pytest.fixture(scope="module")
-def ray_session():
-    """One local Ray instance for the module (the fan-out reuses it and leaves it up)."""
-    ray = pytest.importorskip("ray")
-    init_ray()
-    yield ray
-    ray.shutdown()
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.fanout import init_ray
 from tether_gym_agents.sweep import (
     Search,
     apply_overrides,
@@ -126,14 +125,6 @@ def test_sweep_cli_errors(tmp_path, capsys, monkeypatch):
     opt = _sweep_file(tmp_path, {"search": "optuna", "params": {"gamma": [0.9, 0.99]}}, "o.yml")
     assert main(["--sweep", str(opt), "--out", str(tmp_path / "opt")]) == 2
     assert "pip install optuna" in capsys.readouterr().err
-
-
-@pytest.fixture(scope="module")
-def ray_session():
-    ray = pytest.importorskip("ray")
-    init_ray()
-    yield ray
-    ray.shutdown()
 
 
 @pytest.mark.slow
