@@ -15,7 +15,8 @@ contiguous chunks of rows, each with its own scratch.
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+import functools
+import weakref
 
 import numpy as np
 
@@ -27,6 +28,7 @@ from ..tasks.reward import COMPONENTS
 from .config import EnvConfig
 from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
 from .step_kernel import Rows, StepConfig, new_row_work, step_rows
+from .workers import ChunkWorker
 
 __all__ = ["ChainBatch", "RESET_OPTION_KEYS", "check_options"]
 
@@ -104,6 +106,12 @@ def step_config(config: EnvConfig) -> StepConfig:
         length_nominal=np.asarray(config.chain.initial_lengths, dtype=float))
 
 
+def _stop_workers(workers: list[ChunkWorker]) -> None:
+    """Stop and forget the worker threads of a batch (also when it is garbage collected)."""
+    while workers:
+        workers.pop().stop()
+
+
 class ChainBatch:
     """Arrays and step logic for ``num`` environments with one :class:`EnvConfig`."""
 
@@ -138,7 +146,8 @@ class ChainBatch:
         self._no_action = np.zeros((num, n))
         self._step = Direct(step_rows)
         self._work = [new_row_work(n)]  # one scratch per thread
-        self._pool: ThreadPoolExecutor | None = None
+        self._workers: list[ChunkWorker] = []  # started by the first threaded step
+        self._finalizer = weakref.finalize(self, _stop_workers, self._workers)
 
     # views kept for readability (the arrays live in self.rows)
     @property
@@ -321,28 +330,27 @@ class ChainBatch:
         return -1 if ok.all() else int(index[np.argmin(ok)])
 
     def _step_threaded(self, action: np.ndarray, rows: np.ndarray, n_chunks: int) -> None:
-        """Chunks 1.. on the pool's threads, chunk 0 on this one; wait for all."""
+        """Chunks 1.. on the worker threads, chunk 0 on this one; wait for all."""
         while len(self._work) < n_chunks:
             self._work.append(new_row_work(self.n))
-        if self._pool is None or self._pool._max_workers < n_chunks - 1:
-            if self._pool is not None:
-                self._pool.shutdown()
-            self._pool = ThreadPoolExecutor(max_workers=n_chunks - 1,
-                                            thread_name_prefix="tether_gym")
+        while len(self._workers) < n_chunks - 1:
+            self._workers.append(ChunkWorker())
         count = len(rows)
         bounds = [c * count // n_chunks for c in range(n_chunks + 1)]
-        futures = [self._pool.submit(self._step, rows[bounds[c]:bounds[c + 1]], action,
-                                     self.rows, self.cfg, self._work[c], False)
-                   for c in range(1, n_chunks)]
-        self._step(rows[bounds[0]:bounds[1]], action, self.rows, self.cfg, self._work[0], False)
-        for f in futures:
-            f.result()
+        for c in range(1, n_chunks):
+            self._workers[c - 1].start(functools.partial(
+                self._step, rows[bounds[c]:bounds[c + 1]], action, self.rows, self.cfg,
+                self._work[c], False))
+        try:
+            self._step(rows[bounds[0]:bounds[1]], action, self.rows, self.cfg, self._work[0],
+                       False)
+        finally:
+            for c in range(1, n_chunks):
+                self._workers[c - 1].wait()
 
     def close(self) -> None:
         """Stop the worker threads (if any were started)."""
-        if self._pool is not None:
-            self._pool.shutdown()
-            self._pool = None
+        _stop_workers(self._workers)
 
     def _draw_step_noise(self, rngs, rows) -> None:
         """Draw this step's disturbance and observation noise of every row (or of ``rows``).
