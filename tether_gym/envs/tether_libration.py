@@ -33,19 +33,21 @@ def action_space(config: EnvConfig) -> spaces.Box:
     return spaces.Box(-1.0, 1.0, (config.n_tethers,), dtype=np.float32)
 
 
-def check_action(action, n: int) -> np.ndarray:
-    """Return the action as a C-contiguous float64 (1, n) array; ValueError on a wrong shape.
+def check_action(action, out: np.ndarray) -> np.ndarray:
+    """Copy the action into ``out``, a float64 (1, n) buffer, and return ``out``.
 
-    NaN and inf are rejected by the step itself, before it changes anything.
+    Raises TypeError for anything but real numbers and ValueError for a shape other than
+    (n,); NaN and inf are rejected by the step itself, before it changes anything.
     """
     raw = np.asarray(action)
     if raw.dtype.kind not in "iuf":
         raise TypeError(f"action={action!r} must hold real numbers (no bools or complex), "
                         f"got dtype {raw.dtype}")
-    a = raw.astype(np.float64, copy=False)
-    if a.shape != (n,):
-        raise ValueError(f"action must have shape ({n},), got {a.shape}: {action!r}")
-    return np.ascontiguousarray(a.reshape(1, n))
+    if raw.shape != out.shape[1:]:
+        raise ValueError(f"action must have shape {out.shape[1:]}, got {raw.shape}: "
+                         f"{action!r}")
+    out[0] = raw
+    return out
 
 
 class TetherLibrationEnv(gym.Env):
@@ -193,6 +195,7 @@ class TetherLibrationEnv(gym.Env):
         self.action_space = action_space(self.config)
         self.observation_space = observation_space(self.config)
         self._batch = ChainBatch(self.config, 1)
+        self._action = np.zeros((1, self.config.n_tethers))  # the step's action buffer
         self._rngs: list[np.random.Generator | None] = [None]
         self._needs_reset = True
         self._renderer = None
@@ -227,18 +230,18 @@ class TetherLibrationEnv(gym.Env):
         if self._needs_reset:
             raise RuntimeError("call reset() before step() (the episode has ended or not begun)")
         batch = self._batch
-        a = check_action(action, self.config.n_tethers)
+        rows = batch.rows
+        act = check_action(action, self._action)
         try:
-            batch.step(a, self._rngs)
+            batch.step(act, self._rngs)
         except ValueError:
             raise ValueError(f"action={action!r} must be finite (no NaN or inf)") from None
-        terminated = bool(batch.failure[0] != 0)
-        truncated = bool(batch.rows.truncated[0]) and not terminated
+        terminated = rows.failure.item(0) != 0
+        truncated = rows.truncated.item(0) and not terminated
         self._needs_reset = terminated or truncated
         if self.render_mode == "human":
             self.render()
-        return (batch.obs[0].copy(), float(batch.reward[0]), terminated, truncated,
-                batch.info(0))
+        return rows.obs[0].copy(), rows.reward.item(0), terminated, truncated, batch.info(0)
 
     def render(self):
         """The current frame (``rgb_array``) or draw it in a window (``human``)."""
