@@ -96,20 +96,26 @@ def new_row_work(n: int) -> RowWork:
 
 
 @njit(**INLINE)
-def write_outputs(b, rows, cfg):
+def anomaly_terms(nu, cfg):
+    """(sin nu, cos nu, theta_d, theta_d') at true anomaly nu, computed once per row and step."""
+    ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
+    return math.sin(nu), math.cos(nu), ref, dref
+
+
+@njit(**INLINE)
+def write_outputs(b, rows, cfg, anomaly):
     """Row b's observation and ``info`` entries from its state (layouts in envs.layout).
 
-    The observation gets ``rows.noise[b]`` added to its state entries. The derived
-    info entry is the reels' physical acceleration L0 n^2 (k^4 l'' - 2 e sin(nu) k^3 l')
-    [m/s^2] (:func:`tether_gym.physics.orbit.reel_accel`).
+    ``anomaly`` is :func:`anomaly_terms` of the row's nu. The observation gets
+    ``rows.noise[b]`` added to its state entries. The derived info entry is the reels'
+    physical acceleration L0 n^2 (k^4 l'' - 2 e sin(nu) k^3 l') [m/s^2]
+    (:func:`tether_gym.physics.orbit.reel_accel`).
     """
     y = rows.y[b]
     n = y.shape[0] // 4
     nu = rows.nu[b]
     par = rows.par[b] if rows.par.shape[0] > 1 else rows.par[0]
-    ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
-    sn = math.sin(nu)
-    cn = math.cos(nu)
+    sn, cn, ref, dref = anomaly
     ecc = par[at(P.eccentricity, n)]
     noise = rows.noise[b]
     out = rows.obs[b]
@@ -151,7 +157,7 @@ def write_outputs(b, rows, cfg):
 
 
 @njit(**INLINE)
-def _task(b, cfg, work, rows):
+def _task(b, cfg, work, rows, anomaly):
     """Failure code, reward and its components of row b after its step."""
     y = rows.y[b]
     n = y.shape[0] // 4
@@ -174,15 +180,13 @@ def _task(b, cfg, work, rows):
             if not math.isfinite(rows.derivative[b, i]):
                 rows.derivative[b, i] = 0.0
         return
-    nu = rows.nu[b]
+    sn, cn, ref, dref = anomaly
     ecc = par[at(P.eccentricity, n)]
-    k = 1.0 + ecc * math.cos(nu)
-    sn = math.sin(nu)
+    k = 1.0 + ecc * cn
     dl = at(S.dlength, n)
     for j in range(n):
         work.accel[j] = reel_accel(k, sn, ecc, y[dl + j], rows.derivative[b, dl + j]) \
             / cfg.accel_ref
-    ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
     penalty_terms(y, n, work.action, work.accel, rows.tension_min[b], cfg.length_nominal,
                   cfg.reward, work.penalty)
     rows.reward[b] = reward_terms(y, n, ref, dref, cfg.reward, work.penalty,
@@ -235,11 +239,12 @@ def step_rows(index, action, rows, cfg, work, reset):
             substeps = cfg.substeps
         rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps, work.physics,
                                          out)
+        anomaly = anomaly_terms(rows.nu[b], cfg)
         if reset:
             rows.steps[b] = 0
         else:
             rows.steps[b] += 1
-            _task(b, cfg, work, rows)
+            _task(b, cfg, work, rows, anomaly)
         rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
-        write_outputs(b, rows, cfg)
+        write_outputs(b, rows, cfg, anomaly)
     return -1
