@@ -96,16 +96,15 @@ def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
         except metadata.PackageNotFoundError:
             versions[name] = None
     threads: dict[str, int | None] = {"torch": None, "numba": None}
-    try:
-        import numba
-
-        threads["numba"] = int(numba.get_num_threads())
-    except ImportError:  # pragma: no cover - numba is a dependency
-        pass
     if any(s.kind.value != "baseline" for s in specs):
         import torch
 
         threads["torch"] = int(torch.get_num_threads())
+    # numba's configured count: numba.get_num_threads() would start its OpenMP pool,
+    # which resets the OpenMP thread count torch runs with (and spins while idle)
+    import numba
+
+    threads["numba"] = int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
     git = _git_commit()
     return {
         "versions": versions,
