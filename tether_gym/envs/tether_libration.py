@@ -180,11 +180,17 @@ class TetherLibrationEnv(gym.Env):
 
     ## Version History
 
-    * v0: initial release. Since tether_gym 0.2.0 the reel acceleration is computed by
-      one helper for the reels, the reward and ``info["reel_accel"]``: trajectories,
-      observations, terminations and the other info entries are bitwise those of
-      0.1.0; the reward can differ in its last bit (1 ulp) and ``reel_accel`` by
-      a relative 2e-13.
+    * v0: initial release. tether_gym 0.2.0 keeps v0: with every configuration that
+      worked before, trajectories, observations, terminations and info entries are
+      bitwise those of 0.1.0, except that the reel acceleration is now computed by one
+      helper for the reels, the reward and ``info["reel_accel"]``, so the reward can
+      differ in its last bit (1 ulp) and ``reel_accel`` by a relative 2e-13. Fixed in
+      0.2.0, where 0.1.0 broke its own spec: no step limit is registered any more, so
+      an episode lasts ``orbits_per_episode`` orbits whatever the control step (0.1.0
+      cut every episode at 754 steps); a state or tension beyond 1e6 terminates as
+      ``"diverged"`` with a finite observation (it reached the float32 observation as
+      inf); a reset never starts slack, tumbled, out of bounds or non-finite (a failed
+      random draw is drawn again); invalid arguments, options and actions raise.
     """
 
     metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 30}
