@@ -151,11 +151,6 @@ class ChainBatch:
 
     # views kept for readability (the arrays live in self.rows)
     @property
-    def nu(self) -> np.ndarray:
-        """True anomaly of each row [rad], (num,)."""
-        return self.rows.nu
-
-    @property
     def y(self) -> np.ndarray:
         """State rows (STATE layout), (num, 4n)."""
         return self.rows.y
