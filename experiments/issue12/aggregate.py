@@ -20,7 +20,7 @@ from scipy.stats import trim_mean
 HERE = Path(__file__).resolve().parent
 RUNS = HERE / "runs"
 ORDER = ["v0", "full", "full-R1", "full-R1+mix", "full-R2", "full-R3", "full-O1", "full-X1",
-         "full+A1", "full+gSDE"]
+         "full+A1", "full+A1+mix", "full+A1-R1", "full+gSDE"]
 COLS = [("default", "success", "success"),
         ("default", "tracking_rms_success", "RMS after orbit 1 [rad]"),
         ("default", "reel_excursion", "excursion [-]"), ("default", "reel_effort", "effort [-]"),

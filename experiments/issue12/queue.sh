@@ -6,7 +6,7 @@ cd "$(dirname "$0")/../.." || exit 1
 . .venv/bin/activate
 export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 STEPS=${STEPS:-1000000}
-DEADLINE=$(date -u -d "today 17:29:00" +%s)
+DEADLINE=$(date -u -d "${DEADLINE_AT:-today 17:29:00}" +%s)
 EST=${EST:-660}   # expected seconds per run (train + eval), updated from the last run
 OUT=experiments/issue12/runs
 mkdir -p $OUT

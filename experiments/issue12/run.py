@@ -107,6 +107,21 @@ def make_env(n_envs, seed, env_kwargs, design):
     return venv
 
 
+def _trajectory(infos, rewards, nu0, cfg, truncated):
+    """A rollout.Trajectory from the step infos (row 0: the first step's with nu = nu0;
+    the metrics read rows 1.. and nu[0] only)."""
+    from tether_gym_agents.rollout import RECORDED_KEYS, Trajectory
+
+    first = dict(infos[0], nu=nu0)
+    arrays = {k: np.array([np.asarray(i[k], dtype=float) for i in [first] + infos])
+              for k in RECORDED_KEYS}
+    k = len(infos)
+    return Trajectory(**arrays, action=np.zeros((k, cfg.n_tethers)),
+                      command=np.zeros((k, cfg.n_tethers)), reward=np.asarray(rewards),
+                      failure=infos[-1]["failure"], truncated=bool(truncated),
+                      settings={"control_step": cfg.control_step})
+
+
 def evaluate_suite(model, vecnorm, design, scenarios, seeds):
     """Deterministic episodes, one observation per forward pass; per-episode metrics."""
     out = []
@@ -142,7 +157,7 @@ def evaluate_suite(model, vecnorm, design, scenarios, seeds):
                     finished[i] = bool(info.get("TimeLimit.truncated", False))
         env.close()
         for i in range(num):
-            m = episode_metrics(infos[i], rewards[i], nu0[i], cfg.control_step, finished[i])
+            m = episode_metrics(_trajectory(infos[i], rewards[i], nu0[i], cfg, finished[i]))
             m.update(scenario=sc.name, seed=seeds[i], failure=infos[i][-1]["failure"])
             out.append(m)
     return out
@@ -181,6 +196,8 @@ def main(argv=None):
     p.add_argument("--out", type=Path, default=Path("experiments/issue12/runs"))
     p.add_argument("--eval-seeds", type=int, default=10)
     p.add_argument("--gen-seeds", type=int, default=5)
+    p.add_argument("--eval-only", action="store_true",
+                   help="evaluate the run folder's saved model.zip / vecnormalize.pkl")
     args = p.parse_args(argv)
     torch.set_num_threads(1)
     design, overrides = DESIGNS[args.variant]
@@ -189,17 +206,24 @@ def main(argv=None):
     kw = {**PPO_KW, **overrides}
     venv = EpisodeLog(make_env(8, args.seed, TRAIN_KWARGS, design))
     venv = VecNormalize(venv, gamma=kw["gamma"], norm_obs=True, norm_reward=True, clip_obs=10.0)
-    model = PPO("MlpPolicy", venv, seed=args.seed, device="cpu", verbose=0, **kw)
-    t0 = time.perf_counter()
-    model.learn(args.steps)
-    wall_train = time.perf_counter() - t0
-    model.save(run_dir / "model.zip")
-    venv.save(str(run_dir / "vecnormalize.pkl"))
-    log = venv.venv
-    with open(run_dir / "curve.csv", "w") as fh:
-        fh.write("step,success,rms_after_orbit1,excursion,return,failure\n")
-        for row in log.rows:
-            fh.write(",".join(str(x) for x in row) + "\n")
+    if args.eval_only:
+        venv = VecNormalize.load(str(run_dir / "vecnormalize.pkl"), venv)
+        model = PPO.load(run_dir / "model.zip", device="cpu")
+        wall_train = float(json.loads((run_dir / "train_wall.json").read_text())["wall_train_s"]) \
+            if (run_dir / "train_wall.json").is_file() else float("nan")
+    else:
+        model = PPO("MlpPolicy", venv, seed=args.seed, device="cpu", verbose=0, **kw)
+        t0 = time.perf_counter()
+        model.learn(args.steps)
+        wall_train = time.perf_counter() - t0
+        model.save(run_dir / "model.zip")
+        venv.save(str(run_dir / "vecnormalize.pkl"))
+        (run_dir / "train_wall.json").write_text(json.dumps({"wall_train_s": wall_train}))
+        log = venv.venv
+        with open(run_dir / "curve.csv", "w") as fh:
+            fh.write("step,success,rms_after_orbit1,excursion,return,failure\n")
+            for row in log.rows:
+                fh.write(",".join(str(x) for x in row) + "\n")
     venv.training = False
     t1 = time.perf_counter()
     default = evaluate_suite(model, venv, design, get_suite("default"),

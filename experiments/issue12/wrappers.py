@@ -210,6 +210,8 @@ def register_variants():
         "full-R1+mix": (replace(FULL, track="mix"), FULL_PPO),      # wide + log tracking
         "full-X1": (FULL, {"policy_kwargs": {"net_arch": [64, 64], "log_std_init": -2.0}}),
         "full+A1": (replace(FULL, action="incr"), FULL_PPO),            # reel-rate increments
+        "full+A1+mix": (replace(FULL, action="incr", track="mix"), FULL_PPO),  # A1, wide + log
+        "full+A1-R1": (replace(FULL, action="incr", track="v0"), FULL_PPO),    # A1, Lorentzian
         "full+gSDE": (FULL, {"use_sde": True, "sde_sample_freq": 8,
                              "policy_kwargs": {"net_arch": [64, 64], "log_std_init": -3.5}}),
     }
