@@ -134,7 +134,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
         eps = by_policy[spec.name]
         block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
                  "runs": [None if p is None else display_path(p) for p in spec.runs],
-                 "n_episodes": len(eps)}
+                 "env_kwargs": spec.env_kwargs, "n_episodes": len(eps)}
         for m in METRICS:
             block[m] = iqm(scores[spec.name][m])
         block["success_rate"] = block["success"]

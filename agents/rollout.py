@@ -2,7 +2,7 @@
 
 :func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation`) and by
 the paper reproduction (:mod:`tether_gym_agents.paper`). It builds
-``gym.make_vec("tether_gym/TetherLibration-v0", num_envs=len(seeds),
+``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=len(seeds),
 vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
 ``seeds[i]`` and steps all of them together until each has ended once. Every policy is
 called through stable-baselines3's interface, ``policy.predict(obs, deterministic=True)``,
@@ -30,6 +30,7 @@ __all__ = ["Trajectory", "rollout", "RECORDED_KEYS"]
 
 RECORDED_KEYS = ("nu", "theta", "dtheta", "length", "dlength", "tension", "tension_min",
                  "theta_ref", "reel_accel")
+_COMMAND = "command"  # info["command"]: the normalised command u of the step
 """The env ``info`` entries kept for every sample of a :class:`Trajectory`."""
 
 ORBIT = 2.0 * math.pi
@@ -41,7 +42,7 @@ class Trajectory:
 
     The arrays named in :data:`RECORDED_KEYS` have K + 1 rows for K steps (row 0 from
     the reset ``info``); ``action`` (as given to the env), ``command`` (the commanded
-    reel rate l'_cmd [-] held over step k, after clipping) and ``reward`` have K rows.
+    reel rate l'_cmd [-] held over step k: the env's command u times max_reel_rate) and ``reward`` have K rows.
     ``tension`` is T^ at the sample, ``tension_min`` the smallest T^ at the physics
     substep boundaries of the step that ended there.
 
@@ -167,7 +168,7 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
     n_act = int(base.single_action_space.shape[0])
     num = len(seeds)
     obs, info = venv.reset(seed=seeds, options=options)
-    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS}
+    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS + (_COMMAND,)}
     actions_log, rewards_log = [], []
     active = np.ones(num, dtype=bool)
     end = np.zeros(num, dtype=np.int64)
@@ -188,7 +189,7 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
         step += 1
         actions_log.append(actions.copy())
         rewards_log.append(np.array(reward, dtype=float))
-        for key in RECORDED_KEYS:
+        for key in RECORDED_KEYS + (_COMMAND,):
             rows[key].append(np.array(info[key], dtype=float))
         ended = active & (terminated | trunc)
         for i in np.flatnonzero(ended).tolist():
@@ -205,7 +206,8 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
         k = int(end[i])
         arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
         action = acts[:k, i]
-        out.append(Trajectory(**arrays, action=action, command=layout.to_reel_rate(action),
+        command = layout.to_reel_rate(stacked[_COMMAND][1:k + 1, i])
+        out.append(Trajectory(**arrays, action=action, command=command,
                               reward=rews[:k, i], failure=failure[i],
                               truncated=bool(truncated[i]), seed=seeds[i],
                               settings=dict(settings)))
