@@ -43,7 +43,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .physics import transition
+from .physics import kernels
 from .physics.layout import at
 from .physics.state import PARAMS, STATE, P
 
@@ -136,13 +136,16 @@ class SafetyFilter:
         self.length_margin = lm
         self.accel_bound = float(par[0, at(P.accel_bound, self.n)])
         self.eccentricity = float(par[0, at(P.eccentricity, self.n)])
+        self._substeps = kernels.Substeps(self.physics_step, self.substeps)
+        self._work = kernels.make_scratch(self.n)
         self._lattice = _lattice_size(self.n)
         self._pattern = np.array([p for p in product((-1.0, 0.0, 1.0), repeat=self.n)
                                   if any(p)])  # the 3^n - 1 moves of the pattern search
 
     @classmethod
     def for_env(cls, env: Any, margin: float | None = None,
-                length_margin: float | None = None) -> SafetyFilter:
+                length_margin: float | None = None, eccentricity: float | None = None,
+                masses=None) -> SafetyFilter:
         """Build for a TetherLibration env (wrapped or not, single or vector).
 
         Parameters
@@ -160,12 +163,17 @@ class SafetyFilter:
             covers in one control step at full rate, ``max_reel_rate * control_step``
             (0.0125 by default): one step of travel that the prediction's one-step
             horizon and the command's one-step hold could add to the braking distance.
+        eccentricity, masses : float, sequence of float, or None
+            Nominal e [-] and subsatellite masses (any common unit) of the predicting
+            model when they differ from the env's (model-mismatch studies); None takes
+            the env's configured ones.
         """
         base = env.unwrapped if hasattr(env, "unwrapped") else env
         cfg = getattr(base, "config", None)
         if cfg is None or not hasattr(cfg, "param_rows"):
             raise TypeError(f"env must be a TetherLibration env, got {type(env).__name__}")
-        par = cfg.param_rows(cfg.eccentricity, cfg.masses)
+        par = cfg.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
+                             cfg.masses if masses is None else masses)
         if margin is None:
             margin = float(cfg.reward_weights.safe_tension)
         if length_margin is None:
@@ -180,16 +188,25 @@ class SafetyFilter:
     # ------------------------------------------------------------------ #
     def _predict(self, nu: np.ndarray, y: np.ndarray, cmd: np.ndarray):
         """(tension_min (R, n), l_stop (R, n)) of every row under commands cmd (R, n)."""
-        out = transition(nu, y, cmd * self.max_reel_rate, self.par, self.physics_step,
-                         self.substeps)
-        n = self.n
+        # the compiled step of :func:`tether_gym.physics.transition`, called directly:
+        # the inputs are validated once in project() and the wrapper's checks and
+        # copies cost more than the step itself here
+        rows, n = cmd.shape
+        nu_end = np.array(nu, dtype=float)
+        state = np.array(y, dtype=float)
+        out = kernels.StepOutputs(np.empty((rows, n)), np.empty((rows, 4 * n)),
+                                  np.empty((rows, n)))
+        kernels.transition_rows(nu_end, state,
+                                kernels.StepInputs(np.ascontiguousarray(cmd * self.max_reel_rate),
+                                                   np.zeros((rows, n))),
+                                self.par, self._substeps, out, self._work)
         sl = STATE.slices(n)
-        length = out.state[:, sl["length"]]
-        rate = out.state[:, sl["dlength"]]
+        length = state[:, sl["length"]]
+        rate = state[:, sl["dlength"]]
         if math.isinf(self.accel_bound):
             stop = length
         else:
-            k = 1.0 + self.eccentricity * np.cos(out.nu)[:, None]
+            k = 1.0 + self.eccentricity * np.cos(nu_end)[:, None]
             v = k * k * rate
             stop = length + np.sign(v) * v * v / (2.0 * self.accel_bound)
         tension = out.tension_min

@@ -7,6 +7,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
 
 import tether_gym
 from tether_gym.safety import SafetyFilter
@@ -21,7 +22,7 @@ SHORT = {"orbits_per_episode": 0.1}
 
 @pytest.fixture
 def env():
-    e = gym.make(tether_gym.ENV_ID, **SHORT)
+    e = Monitor(gym.make(tether_gym.ENV_ID, **SHORT))  # evaluate_policy asks for it
     yield e
     e.close()
 
