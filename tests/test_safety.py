@@ -84,8 +84,9 @@ def test_the_sample_exercises_every_case(cases):
     assert (res.active & res.feasible).sum() >= 10
 
 
-def test_never_below_the_margin_when_a_safe_command_exists(filt, env, cases):
-    nu, y, desired, res = cases
+@pytest.mark.parametrize("sample", ["cases", "harsh"])
+def test_never_below_the_margin_when_a_safe_command_exists(filt, env, sample, request):
+    nu, y, desired, res = request.getfixturevalue(sample)
     for b in range(len(nu)):
         if not _grid_truth(filt, env, nu[b], y[b]).any():
             continue

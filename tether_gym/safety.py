@@ -102,7 +102,8 @@ class SafetyFilter:
     Notes
     -----
     Deterministic: the same inputs give bitwise the same outputs, for any batch size
-    (each row is searched on its own; the candidates are fixed lattices).
+    (each row is searched on its own; the candidates are fixed lattices). One filter
+    holds one scratch buffer of the compiled step: do not share it between threads.
     """
 
     def __init__(self, params, n_tethers: int, max_reel_rate: float, physics_step: float,
