@@ -74,6 +74,10 @@ class Trajectory:
     truncated: bool
     seed: int | None = None
     settings: dict = field(default_factory=dict)
+    filter_active: np.ndarray | None = None
+    """(K,) bool: whether a safety filter changed step k's action; None for policies
+    without one (those that do not set ``last_filter_active``, see
+    :class:`tether_gym_agents.hybrid.FilteredPolicy`)."""
 
     @property
     def orbits(self) -> np.ndarray:
@@ -175,6 +179,7 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
     failure: list[str | None] = [None] * num
     truncated = np.zeros(num, dtype=bool)
     actions = np.zeros((num, n_act), dtype=np.float32)
+    filtered: list[list[bool]] = [[] for _ in range(num)]
     step = 0
     while active.any():
         for i in np.flatnonzero(active).tolist():
@@ -184,6 +189,9 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
                 raise ValueError(f"policy {policies[i]!r} returned an action of shape "
                                  f"{action.shape}; this env needs ({n_act},) per observation")
             actions[i] = action.reshape(n_act)
+            flag = getattr(policies[i], "last_filter_active", None)
+            if flag is not None:
+                filtered[i].append(bool(flag))
         actions[~active] = 0.0
         obs, reward, terminated, trunc, info = venv.step(actions)
         step += 1
@@ -210,5 +218,7 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
         out.append(Trajectory(**arrays, action=action, command=command,
                               reward=rews[:k, i], failure=failure[i],
                               truncated=bool(truncated[i]), seed=seeds[i],
-                              settings=dict(settings)))
+                              settings=dict(settings),
+                              filter_active=(np.array(filtered[i], dtype=bool)
+                                             if len(filtered[i]) == k else None)))
     return out
