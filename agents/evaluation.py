@@ -13,7 +13,9 @@ metrics of :mod:`tether_gym_agents.metrics`; :mod:`tether_gym_agents.results` tu
 them into the statistics over training runs (:mod:`tether_gym_agents.stats`), the
 tables and ``results.json``.
 
-A policy is a baseline name (``smc``, ``zero``, ``periodic``, ``random``), a shipped
+A policy is a baseline name (``smc``, the paper's sliding-mode law; ``smc_filtered``,
+the same law behind the model-based safety filter of :mod:`tether_gym.safety`;
+``zero``, ``periodic``, ``random``; all run with ``action_mode="rate"``), a shipped
 agent (``ppo``, ``sac``, ...), a run folder or model file written by ``train.py``, or a
 folder of seed run folders (``runs/ppo/seed_0/``, ``seed_1/``, ...), which is one
 policy with one run per folder.
@@ -30,7 +32,6 @@ import time
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -45,7 +46,7 @@ from .scenarios import Scenario, describe_suites, get_suite
 __all__ = ["main", "evaluate", "resolve_policy", "make_policy", "PolicyKind", "PolicySpec",
            "BASELINES", "MAX_SEEDS"]
 
-BASELINES = ("smc", "zero", "periodic", "random")
+BASELINES = ("smc", "smc_filtered", "zero", "periodic", "random")
 ACTION_KEYS = ("action_mode", "increment_gain")
 """Env arguments that define what a policy's action means."""
 MAX_SEEDS = 1000
@@ -124,7 +125,7 @@ class PolicySpec:
             return [self.agents[run]] * len(seeds)
         if self.name == "random":
             return [RandomPolicy(env, seed=s) for s in seeds]
-        if self.name == "smc":
+        if self.name in ("smc", "smc_filtered"):
             nominal = None
             if scenario.nominal is not None:
                 from tether_gym.physics import TetherChain
@@ -134,11 +135,24 @@ class PolicySpec:
                                       scenario.nominal["eccentricity"], cfg.gravity,
                                       cfg.total_tether_length / cfg.semi_latus_rectum)
             policy: ReelRatePolicy = SlidingModeController.for_env(env, nominal=nominal)
+            if self.name == "smc_filtered":
+                return [_filtered(policy, env, scenario) for _ in seeds]
         elif self.name == "zero":
             policy = ZeroStateReel.for_env(env)
         else:
             policy = PeriodicReel.for_env(env)
         return [policy] * len(seeds)
+
+
+def _filtered(policy, env, scenario: Scenario):
+    """``policy`` behind the safety filter on the same nominal model.
+
+    One per episode: the filter counts its interventions.
+    """
+    from .hybrid import FilteredPolicy
+
+    nominal = scenario.nominal or {}
+    return FilteredPolicy.for_env(policy, env, **nominal)
 
 
 def _seed_runs(path: Path) -> list[Path]:

@@ -119,6 +119,7 @@ class FilteredPolicy(_Filtering):
         self.policy = policy
         self.safety_filter = safety_filter
         self.layout = _layout_of(policy, layout)
+        self.layout.require_rate_mode(type(self).__name__)
         if safety_filter.n != self.layout.n_tethers:
             raise ValueError(f"the filter is for {safety_filter.n} tethers, the policy's env "
                              f"has {self.layout.n_tethers}")
@@ -175,6 +176,7 @@ class ResidualPolicy(_Filtering):
         self.scale = check_range("scale", scale, 0.0)
         self.safety_filter = safety_filter
         self.layout = _layout_of(base, layout)
+        self.layout.require_rate_mode(type(self).__name__)
         self._init_counts()
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):

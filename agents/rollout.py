@@ -42,7 +42,8 @@ class Trajectory:
 
     The arrays named in :data:`RECORDED_KEYS` have K + 1 rows for K steps (row 0 from
     the reset ``info``); ``action`` (as given to the env), ``command`` (the commanded
-    reel rate l'_cmd [-] held over step k: the env's command u times max_reel_rate) and ``reward`` have K rows.
+    reel rate l'_cmd [-] held over step k: the env's command u times max_reel_rate) and
+    ``reward`` have K rows.
     ``tension`` is T^ at the sample, ``tension_min`` the smallest T^ at the physics
     substep boundaries of the step that ended there.
 

@@ -15,7 +15,7 @@ from tether_gym.wrappers import INFO_KEYS, SafetyFilterWrapper, state_of
 
 
 def _env(**kwargs):
-    return gym.make(tether_gym.ENV_ID, orbits_per_episode=0.2, **kwargs)
+    return gym.make(tether_gym.ENV_ID, orbits_per_episode=0.2, action_mode="rate", **kwargs)
 
 
 # the env's own (tests/envs/conftest.py: theta' and l' are unbounded), and the checker's
@@ -73,15 +73,7 @@ def test_state_of_reads_the_true_state():
 
 
 def test_rejects_other_action_modes():
-    env = _env()
-
-    class Cfg:
-        action_mode = "increment"
-
-        def __getattr__(self, name):
-            return getattr(env.unwrapped.config, name)
-
-    env.unwrapped.config = Cfg()
+    env = gym.make(tether_gym.ENV_ID)  # v1's default: increments of the command
     with pytest.raises(ValueError, match="action_mode='rate'"):
         SafetyFilterWrapper(env)
     env.close()

@@ -17,7 +17,7 @@ from tether_gym_agents.metrics import METRICS, episode_metrics
 from tether_gym_agents.obs import ObservationLayout
 from tether_gym_agents.rollout import rollout
 
-SHORT = {"orbits_per_episode": 0.1}
+SHORT = {"orbits_per_episode": 0.1, "action_mode": "rate"}
 
 
 @pytest.fixture
@@ -65,12 +65,14 @@ def test_safe_actions_pass_bit_for_bit(env):
 
 
 def test_the_filter_changes_a_reel_in_that_would_end_too_short():
-    env = gym.make(tether_gym.ENV_ID, initial_lengths=(0.1, 0.9), orbits_per_episode=0.3)
+    env = gym.make(tether_gym.ENV_ID, initial_lengths=(0.1, 0.9), orbits_per_episode=0.3,
+                   action_mode="rate")
     raw = Constant([-1.0, 0.0])
-    plain = rollout(raw, [0], {"initial_lengths": (0.1, 0.9), "orbits_per_episode": 0.3})[0]
+    kwargs = {"initial_lengths": (0.1, 0.9), "orbits_per_episode": 0.3, "action_mode": "rate"}
+    plain = rollout(raw, [0], kwargs)[0]
     assert plain.failure == "length"
     policy = FilteredPolicy(raw, SafetyFilter.for_env(env), ObservationLayout.from_env(env))
-    traj = rollout(policy, [0], {"initial_lengths": (0.1, 0.9), "orbits_per_episode": 0.3})[0]
+    traj = rollout(policy, [0], kwargs)[0]
     assert traj.failure is None and traj.length[:, 0].min() >= 0.05
     m = episode_metrics(traj)
     assert 0.0 < m["filter_rate"] < 1.0
