@@ -211,8 +211,8 @@ def step_rows(index, action, rows, cfg, work, reset):
     ``action`` (B, n) holds the actions, clipped to [-1, 1]; they set the normalised
     command u (``rows.command``): u = action, or u <- clip(u + gain * action, -1, 1)
     with ``cfg.incremental``; l'_cmd = u * max_reel_rate. Returns -1, or, before
-    anything is stepped, the first listed row whose action is NaN or inf (then no row is touched). With
-    ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
+    anything is stepped, the first listed row whose action is NaN or inf (then no row
+    is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
     ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at their
     initial state with the reels holding their rate (the state the first step starts
     from), their observation and info entries, zero steps and the command u = clip(l' /
