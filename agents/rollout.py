@@ -8,9 +8,11 @@ vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
 called through stable-baselines3's interface, ``policy.predict(obs, deterministic=True)``,
 with **one observation per call** (``obs[i:i + 1]``): a batched forward pass of a torch
 network changes an action by ~1e-7 with the batch size, which a closed loop can amplify
-into a different episode. With one observation per call, an episode's actions depend on
-its seed, the env arguments and the policy only, never on how many episodes run beside
-it or in which order the policies are evaluated.
+into a different episode. The exception are policies that declare ``batch_invariant``
+(trained MLPs, :mod:`tether_gym_agents.mlp`): their rows are bitwise independent of
+the batch, so the episodes that share one get a single call. Either way an episode's
+actions depend on its seed, the env arguments and the policy only, never on how many
+episodes run beside it or in which order the policies are evaluated.
 """
 
 from __future__ import annotations
@@ -164,6 +166,15 @@ def rollout(policies, seeds: Sequence[int | None], env_kwargs: dict | None = Non
             venv.close()
 
 
+def _checked(action, policy, n_act: int, rows: int) -> np.ndarray:
+    """A policy's action for ``rows`` observations as a (rows, n_act) float32 array."""
+    action = np.asarray(action, dtype=np.float32)
+    if action.size != n_act * rows:
+        raise ValueError(f"policy {policy!r} returned an action of shape {action.shape}; "
+                         f"this env needs ({n_act},) per observation")
+    return action.reshape(rows, n_act)
+
+
 def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajectory]:
     base = venv.unwrapped
     if base.num_envs != len(seeds):
@@ -182,14 +193,24 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
     actions = np.zeros((num, n_act), dtype=np.float32)
     filtered: list[list[bool]] = [[] for _ in range(num)]
     step = 0
+    # a batch-invariant policy shared by several episodes gets their observations in
+    # one call (row i of the batch is bitwise row i alone); every other policy one each
+    shared: dict[int, list[int]] = {}
+    for i, policy in enumerate(policies):
+        if getattr(policy, "batch_invariant", False):
+            shared.setdefault(id(policy), []).append(i)
+    batched = {i for rows_ in shared.values() for i in rows_}
     while active.any():
+        for rows_ in shared.values():
+            idx = [i for i in rows_ if active[i]]
+            if idx:
+                action, _ = policies[idx[0]].predict(obs[idx], deterministic=True)
+                actions[idx] = _checked(action, policies[idx[0]], n_act, len(idx))
         for i in np.flatnonzero(active).tolist():
+            if i in batched:
+                continue
             action, _ = policies[i].predict(obs[i:i + 1], deterministic=True)
-            action = np.asarray(action, dtype=np.float32)
-            if action.size != n_act:
-                raise ValueError(f"policy {policies[i]!r} returned an action of shape "
-                                 f"{action.shape}; this env needs ({n_act},) per observation")
-            actions[i] = action.reshape(n_act)
+            actions[i] = _checked(action, policies[i], n_act, 1)[0]
             flag = getattr(policies[i], "last_filter_active", None)
             if flag is not None:
                 filtered[i].append(bool(flag))

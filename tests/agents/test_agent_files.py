@@ -115,6 +115,10 @@ def test_safe_files_round_trip_to_identical_actions(tmp_path, algo):
     obs = rng.normal(0.0, 1.0, size=(64, 20)).astype(np.float32)
     expected = model.predict(np.clip((obs - rms.mean) / np.sqrt(rms.var + 1e-8), -5, 5)
                              .astype(np.float32), deterministic=True)[0]
+    # the float64 NumPy forward pass (tether_gym_agents.mlp) agrees to float32 rounding,
+    # torch's own forward pass bit for bit
+    np.testing.assert_allclose(agent.predict(obs)[0], expected, rtol=0, atol=2e-6)
+    agent.mlp = None
     assert np.array_equal(agent.predict(obs)[0], expected)
     assert agent.algo == algo and agent.env_kwargs == {"masses": [1.0, 2.0]}
     meta = json.loads((tmp_path / algo / AGENT_FILE).read_text())  # strict JSON
