@@ -42,7 +42,8 @@ RANDOMISED = {
 @pytest.mark.parametrize("kwargs", [
     {},
     {"n_bodies": 4, "eccentricity_range": (0.1, 0.4), "mass_range": 0.3},
-], ids=["default", "randomised-N4"])
+    {"action_mode": "rate"},
+], ids=["default", "randomised-N4", "rate-mode"])
 def test_check_env_gymnasium_and_sb3(make_env, kwargs):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
