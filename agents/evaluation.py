@@ -13,7 +13,9 @@ metrics of :mod:`tether_gym_agents.metrics`; :mod:`tether_gym_agents.results` tu
 them into the statistics over training runs (:mod:`tether_gym_agents.stats`), the
 tables and ``results.json``.
 
-A policy is a baseline name (``smc``, ``zero``, ``periodic``, ``random``), a shipped
+A policy is a baseline name (``smc``, the paper's sliding-mode law; ``smc_filtered``,
+the same law behind the model-based safety filter of :mod:`tether_gym.safety`;
+``zero``, ``periodic``, ``random``; all run with ``action_mode="rate"``), a shipped
 agent (``ppo``, ``sac``, ...), a run folder or model file written by ``train.py``, or a
 folder of seed run folders (``runs/ppo/seed_0/``, ``seed_1/``, ...), which is one
 policy with one run per folder.
@@ -30,7 +32,6 @@ import time
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
-from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -45,7 +46,9 @@ from .scenarios import Scenario, describe_suites, get_suite
 __all__ = ["main", "evaluate", "resolve_policy", "make_policy", "PolicyKind", "PolicySpec",
            "BASELINES", "MAX_SEEDS"]
 
-BASELINES = ("smc", "zero", "periodic", "random")
+BASELINES = ("smc", "smc_filtered", "zero", "periodic", "random")
+ACTION_KEYS = ("action_mode", "increment_gain")
+"""Env arguments that define what a policy's action means."""
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
 MAX_SEED = 2**31 - 1
@@ -73,6 +76,25 @@ class PolicySpec:
     runs: list
     agents: list = field(default_factory=list)
     allow_pickle: bool = False
+
+    @property
+    def env_kwargs(self) -> dict:
+        """Env arguments the policy needs on every scenario (its action mode).
+
+        The baselines command reel rates (``action_mode="rate"``); a trained agent
+        runs in the action mode it was trained in (:data:`ACTION_KEYS` of its recorded
+        env arguments, the env's defaults when absent). Nothing else of the training
+        env is used: the scenario sets the rest.
+        """
+        if self.kind is PolicyKind.BASELINE:
+            return {"action_mode": "rate"}
+        self.load()
+        recorded = [{k: agent.env_kwargs[k] for k in ACTION_KEYS if k in agent.env_kwargs}
+                    for agent in self.agents]
+        if any(r != recorded[0] for r in recorded):
+            raise ValueError(f"policy {self.name!r}: its runs were trained with different "
+                             f"action settings {recorded}")
+        return recorded[0]
 
     @property
     def n_runs(self) -> int:
@@ -103,7 +125,7 @@ class PolicySpec:
             return [self.agents[run]] * len(seeds)
         if self.name == "random":
             return [RandomPolicy(env, seed=s) for s in seeds]
-        if self.name == "smc":
+        if self.name in ("smc", "smc_filtered"):
             nominal = None
             if scenario.nominal is not None:
                 from tether_gym.physics import TetherChain
@@ -113,11 +135,24 @@ class PolicySpec:
                                       scenario.nominal["eccentricity"], cfg.gravity,
                                       cfg.total_tether_length / cfg.semi_latus_rectum)
             policy: ReelRatePolicy = SlidingModeController.for_env(env, nominal=nominal)
+            if self.name == "smc_filtered":
+                return [_filtered(policy, env, scenario) for _ in seeds]
         elif self.name == "zero":
             policy = ZeroStateReel.for_env(env)
         else:
             policy = PeriodicReel.for_env(env)
         return [policy] * len(seeds)
+
+
+def _filtered(policy, env, scenario: Scenario):
+    """``policy`` behind the safety filter on the same nominal model.
+
+    One per episode: the filter counts its interventions.
+    """
+    from .hybrid import FilteredPolicy
+
+    nominal = scenario.nominal or {}
+    return FilteredPolicy.for_env(policy, env, **nominal)
 
 
 def _seed_runs(path: Path) -> list[Path]:
@@ -170,11 +205,32 @@ def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0)
 
 @dataclass
 class _Setting:
-    """A scenario with its resolved env arguments and a probe env."""
+    """A scenario with its resolved env arguments and a probe env per action setting."""
 
     scenario: Scenario
     env_kwargs: dict
-    env: Any
+    envs: dict = field(default_factory=dict)
+
+    def kwargs_for(self, spec: PolicySpec) -> dict:
+        """The scenario's env arguments with the policy's action setting."""
+        return {**self.env_kwargs, **spec.env_kwargs}
+
+    def env_for(self, spec: PolicySpec):
+        """The scenario's probe env in the policy's action setting (built once)."""
+        key = tuple(sorted(spec.env_kwargs.items()))
+        if key not in self.envs:
+            self.envs[key] = gym.make(tether_gym.ENV_ID, **self.kwargs_for(spec))
+        return self.envs[key]
+
+    @property
+    def env(self):
+        """A probe env of the scenario (the first one built)."""
+        return next(iter(self.envs.values()))
+
+    def close(self) -> None:
+        """Close the probe envs."""
+        for env in self.envs.values():
+            env.close()
 
 
 def _prepare(specs: list[PolicySpec], scenarios, env_kwargs: dict, seeds: list[int],
@@ -184,26 +240,29 @@ def _prepare(specs: list[PolicySpec], scenarios, env_kwargs: dict, seeds: list[i
     Raises ValueError naming the scenario, the policy and what does not fit.
     """
     settings = []
-    for sc in scenarios:
-        kwargs = sc.env_kwargs_with(env_kwargs)
-        try:
-            env = gym.make(tether_gym.ENV_ID, **kwargs)
-        except (ValueError, TypeError) as exc:
-            given = f" with --env-kwargs {env_kwargs}" if env_kwargs else ""
-            raise ValueError(f"scenario {sc.name!r}{given}: {exc}") from None
-        settings.append(_Setting(sc, kwargs, env))
     for spec in specs:
         spec.load()
-    for st in settings:
-        obs, _ = st.env.reset(seed=seeds[0])
-        n_act = st.env.action_space.shape[0]
+    for sc in scenarios:
+        st = _Setting(sc, sc.env_kwargs_with(env_kwargs))
+        settings.append(st)
         for spec in specs:
+            try:
+                st.env_for(spec)
+            except (ValueError, TypeError) as exc:
+                given = f" with --env-kwargs {env_kwargs}" if env_kwargs else ""
+                raise ValueError(f"scenario {sc.name!r}{given} for policy {spec.name!r}: "
+                                 f"{exc}") from None
+    for st in settings:
+        for spec in specs:
+            env = st.env_for(spec)
+            obs, _ = env.reset(seed=seeds[0])
+            n_act = env.action_space.shape[0]
             for run in range(spec.n_runs):
                 where = (f"policy {spec.name!r}"
                          + (f" (run {spec.runs[run]})" if spec.runs[run] is not None else "")
                          + f" on scenario {st.scenario.name!r}")
                 try:
-                    policy = spec.policies(run, st.env, st.scenario, seeds[:1])[0]
+                    policy = spec.policies(run, env, st.scenario, seeds[:1])[0]
                     action, _ = policy.predict(obs[None], deterministic=True)
                 except (ValueError, TypeError) as exc:
                     raise ValueError(f"{where}: {exc}") from None
@@ -284,8 +343,8 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
             for j, st in enumerate(settings, 1):
                 t0 = time.perf_counter()
                 for run in range(spec.n_runs):
-                    trajs = rollout(spec.policies(run, st.env, st.scenario, seeds), seeds,
-                                    st.env_kwargs)
+                    trajs = rollout(spec.policies(run, st.env_for(spec), st.scenario, seeds),
+                                    seeds, st.kwargs_for(spec))
                     for s, traj in zip(seeds, trajs, strict=True):
                         episodes.append({"policy": spec.name, "run": run,
                                          "scenario": st.scenario.name, "seed": s,
@@ -300,7 +359,7 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
                 f"{time.perf_counter() - t_policy:.1f} s")
     finally:
         for st in settings:
-            st.env.close()
+            st.close()
     results = build_results(specs, settings, seeds, episodes, env_kwargs=env_kwargs,
                             suite=suite, command=command, torch_threads=torch_threads)
     if out is not None:

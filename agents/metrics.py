@@ -17,6 +17,8 @@ anomaly nu_k counted from the reset, one orbit = 2 pi rad), on the step rows:
 * ``success``: 1 if it ran to the time limit without failure.
 * ``chattering`` [-]: total variation of the reel rates, sum_k sum_i |l_i'(k) - l_i'(k-1)|.
 * ``return`` [-]: sum of the rewards.
+* ``filter_rate`` [-]: fraction of the steps whose action a safety filter changed; only
+  for filtered policies (``traj.filter_active`` set), and not in :data:`METRICS`.
 
 The benchmark (:mod:`tether_gym_agents.evaluation`) and the paper reproduction
 (:mod:`tether_gym_agents.paper`) both compute these from the same trajectories;
@@ -78,7 +80,8 @@ def episode_metrics(traj) -> dict:
     Returns
     -------
     dict
-        ``{metric: float}`` for every name in :data:`METRICS`; NaN where undefined.
+        ``{metric: float}`` for every name in :data:`METRICS`, plus ``filter_rate`` for
+        filtered policies; NaN where undefined.
     """
     orbit = 2.0 * math.pi
     nu = traj.nu[1:] - traj.nu[0]
@@ -90,7 +93,7 @@ def episode_metrics(traj) -> dict:
     maxerr = np.abs(err).max(axis=1)
     last = nu > nu[-1] - orbit
     converge = None if failure is not None else convergence_orbits(nu / orbit, maxerr)
-    return {
+    out = {
         "tracking_rms": float(np.sqrt(np.mean(err[after] ** 2))) if after.any() else math.nan,
         "final_error": float(maxerr[last].max()),
         "converge_orbits": math.nan if converge is None else converge,
@@ -104,3 +107,7 @@ def episode_metrics(traj) -> dict:
         "chattering": float(np.abs(np.diff(dl, axis=0)).sum()),
         "return": float(np.sum(traj.reward)),
     }
+    active = getattr(traj, "filter_active", None)
+    if active is not None:
+        out["filter_rate"] = float(np.mean(active)) if len(active) else math.nan
+    return out

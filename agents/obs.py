@@ -27,6 +27,10 @@ class ObservedState(NamedTuple):
     dlength: np.ndarray
     theta_ref: np.ndarray
     dtheta_ref: np.ndarray
+    error: np.ndarray
+    derror: np.ndarray
+    log_length: np.ndarray
+    command: np.ndarray
     eccentricity: np.ndarray | None
     mass_fractions: np.ndarray | None
 
@@ -45,21 +49,32 @@ class ObservationLayout:
     frequency : float
         w of the reference theta_d = A sin(w nu) [-].
     max_reel_rate : float
-        l'_cmd at |action| = 1 [-].
+        l'_cmd at |u| = 1 [-].
     with_params : bool
         Whether e and the mass fractions close the observation.
+    action_mode : str
+        The env's ``action_mode``: ``"rate"`` (the action is the command u) or
+        ``"increment"`` (the action changes u).
     """
 
     n_tethers: int
     frequency: float
     max_reel_rate: float
     with_params: bool = False
+    action_mode: str = "rate"
 
     @classmethod
     def from_env(cls, env) -> ObservationLayout:
         """The layout of a TetherLibration env (wrapped or not)."""
         cfg = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
-        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.with_params)
+        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.with_params,
+                   cfg.action_mode)
+
+    def require_rate_mode(self, who: str) -> None:
+        """Raise ValueError unless the env takes reel-rate commands as actions."""
+        if self.action_mode != "rate":
+            raise ValueError(f"{who} commands reel rates: make the env with "
+                             f"action_mode='rate' (it has action_mode={self.action_mode!r})")
 
     @property
     def obs_dim(self) -> int:
@@ -95,16 +110,16 @@ class ObservationLayout:
         return ObservedState(**values)
 
     def to_action(self, reel_rate: np.ndarray) -> np.ndarray:
-        """Commanded l' [-] -> action in [-1, 1] (float32), clipped."""
+        """Commanded l' [-] -> action in [-1, 1] (float32), clipped (``action_mode="rate"``)."""
         return np.clip(np.asarray(reel_rate) / self.max_reel_rate, -1.0, 1.0).astype(np.float32)
 
-    def to_reel_rate(self, action: np.ndarray) -> np.ndarray:
-        """Action -> commanded l' [-] (float64), as the env applies it.
+    def to_reel_rate(self, command: np.ndarray) -> np.ndarray:
+        """Normalised command u -> commanded l' [-] (float64), as the env applies it.
 
         Clipped to [-1, 1] and scaled by ``max_reel_rate`` (the inverse of
-        :meth:`to_action` inside the box).
+        :meth:`to_action` inside the box). In ``action_mode="rate"`` u is the action.
         """
-        return np.clip(np.asarray(action, dtype=np.float64), -1.0, 1.0) * self.max_reel_rate
+        return np.clip(np.asarray(command, dtype=np.float64), -1.0, 1.0) * self.max_reel_rate
 
 
 class ReelRatePolicy:
@@ -112,10 +127,14 @@ class ReelRatePolicy:
 
     Subclasses set ``self.layout`` and implement :meth:`reel_rate`, mapping a batch of
     observations (B, obs_dim) to commanded reel rates l' (B, N-1) [-]; :meth:`predict`
-    scales them to the env's action box with :meth:`ObservationLayout.to_action`.
+    scales them to the env's action box with :meth:`ObservationLayout.to_action`. They
+    run on envs made with ``action_mode="rate"`` (:data:`ENV_KWARGS`), where the
+    action is the command.
     """
 
     layout: ObservationLayout
+    ENV_KWARGS = {"action_mode": "rate"}
+    """Env arguments these policies need."""
 
     def reel_rate(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         """Commanded reel rates l' (B, N-1) [-] for observations (B, obs_dim)."""

@@ -77,6 +77,7 @@ class ZeroStateReel(ReelRatePolicy):
         if not isinstance(layout, ObservationLayout):
             raise TypeError(f"layout must be an ObservationLayout, got {type(layout).__name__}")
         self.eccentricity = check_range("eccentricity", eccentricity, 0.0, 1.0, high_open=True)
+        layout.require_rate_mode(type(self).__name__)
         self.layout = layout
         self.use_observed_params = bool(use_observed_params)
 
@@ -149,6 +150,7 @@ class PeriodicReel(ReelRatePolicy):
         if not isinstance(angles, AngleSource):
             raise TypeError(f"angles must be an AngleSource, got {angles!r}; valid: "
                             f"{[a.name for a in AngleSource]}")
+        layout.require_rate_mode(type(self).__name__)
         self.layout = layout
         self.angles = angles
         self.use_observed_params = bool(use_observed_params)
@@ -193,6 +195,9 @@ class RandomPolicy:
     seed : int or None
         Seed of the policy's own generator (independent of the env's).
     """
+
+    ENV_KWARGS = {"action_mode": "rate"}
+    """Env arguments of the benchmark's random baseline (uniform reel-rate commands)."""
 
     def __init__(self, env, seed: int | None = None):
         base = _base(env)

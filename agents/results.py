@@ -134,7 +134,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
         eps = by_policy[spec.name]
         block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
                  "runs": [None if p is None else display_path(p) for p in spec.runs],
-                 "n_episodes": len(eps)}
+                 "env_kwargs": spec.env_kwargs, "n_episodes": len(eps)}
         for m in METRICS:
             block[m] = iqm(scores[spec.name][m])
         block["success_rate"] = block["success"]
@@ -143,6 +143,9 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
             m: (None if reference is None else probability_of_improvement(
                 scores[spec.name][m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
         block["failures"] = {f: int(sum(e[f] for e in eps)) for f in FAILURES}
+        if eps and all("filter_rate" in e for e in eps):  # a safety filter's interventions
+            block["filter_rate"] = iqm(run_scores(eps, "filter_rate", list(range(spec.n_runs)),
+                                                  scenario_names))
         policies[spec.name] = block
     per_scenario = {
         sc: {spec.name: {m: iqm(scores[spec.name][m][:, j]) for m in METRICS}

@@ -2,15 +2,17 @@
 
 :func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation`) and by
 the paper reproduction (:mod:`tether_gym_agents.paper`). It builds
-``gym.make_vec("tether_gym/TetherLibration-v0", num_envs=len(seeds),
+``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=len(seeds),
 vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
 ``seeds[i]`` and steps all of them together until each has ended once. Every policy is
 called through stable-baselines3's interface, ``policy.predict(obs, deterministic=True)``,
 with **one observation per call** (``obs[i:i + 1]``): a batched forward pass of a torch
 network changes an action by ~1e-7 with the batch size, which a closed loop can amplify
-into a different episode. With one observation per call, an episode's actions depend on
-its seed, the env arguments and the policy only, never on how many episodes run beside
-it or in which order the policies are evaluated.
+into a different episode. The exception are policies that declare ``batch_invariant``
+(trained MLPs, :mod:`tether_gym_agents.mlp`): their rows are bitwise independent of
+the batch, so the episodes that share one get a single call. Either way an episode's
+actions depend on its seed, the env arguments and the policy only, never on how many
+episodes run beside it or in which order the policies are evaluated.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ __all__ = ["Trajectory", "rollout", "RECORDED_KEYS"]
 
 RECORDED_KEYS = ("nu", "theta", "dtheta", "length", "dlength", "tension", "tension_min",
                  "theta_ref", "reel_accel")
+_COMMAND = "command"  # info["command"]: the normalised command u of the step
 """The env ``info`` entries kept for every sample of a :class:`Trajectory`."""
 
 ORBIT = 2.0 * math.pi
@@ -41,7 +44,8 @@ class Trajectory:
 
     The arrays named in :data:`RECORDED_KEYS` have K + 1 rows for K steps (row 0 from
     the reset ``info``); ``action`` (as given to the env), ``command`` (the commanded
-    reel rate l'_cmd [-] held over step k, after clipping) and ``reward`` have K rows.
+    reel rate l'_cmd [-] held over step k: the env's command u times max_reel_rate) and
+    ``reward`` have K rows.
     ``tension`` is T^ at the sample, ``tension_min`` the smallest T^ at the physics
     substep boundaries of the step that ended there.
 
@@ -73,6 +77,10 @@ class Trajectory:
     truncated: bool
     seed: int | None = None
     settings: dict = field(default_factory=dict)
+    filter_active: np.ndarray | None = None
+    """(K,) bool: whether a safety filter changed step k's action; None for policies
+    without one (those that do not set ``last_filter_active``, see
+    :class:`tether_gym_agents.hybrid.FilteredPolicy`)."""
 
     @property
     def orbits(self) -> np.ndarray:
@@ -158,6 +166,15 @@ def rollout(policies, seeds: Sequence[int | None], env_kwargs: dict | None = Non
             venv.close()
 
 
+def _checked(action, policy, n_act: int, rows: int) -> np.ndarray:
+    """A policy's action for ``rows`` observations as a (rows, n_act) float32 array."""
+    action = np.asarray(action, dtype=np.float32)
+    if action.size != n_act * rows:
+        raise ValueError(f"policy {policy!r} returned an action of shape {action.shape}; "
+                         f"this env needs ({n_act},) per observation")
+    return action.reshape(rows, n_act)
+
+
 def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajectory]:
     base = venv.unwrapped
     if base.num_envs != len(seeds):
@@ -167,28 +184,42 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
     n_act = int(base.single_action_space.shape[0])
     num = len(seeds)
     obs, info = venv.reset(seed=seeds, options=options)
-    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS}
+    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS + (_COMMAND,)}
     actions_log, rewards_log = [], []
     active = np.ones(num, dtype=bool)
     end = np.zeros(num, dtype=np.int64)
     failure: list[str | None] = [None] * num
     truncated = np.zeros(num, dtype=bool)
     actions = np.zeros((num, n_act), dtype=np.float32)
+    filtered: list[list[bool]] = [[] for _ in range(num)]
     step = 0
+    # a batch-invariant policy shared by several episodes gets their observations in
+    # one call (row i of the batch is bitwise row i alone); every other policy one each
+    shared: dict[int, list[int]] = {}
+    for i, policy in enumerate(policies):
+        if getattr(policy, "batch_invariant", False):
+            shared.setdefault(id(policy), []).append(i)
+    batched = {i for rows_ in shared.values() for i in rows_}
     while active.any():
+        for rows_ in shared.values():
+            idx = [i for i in rows_ if active[i]]
+            if idx:
+                action, _ = policies[idx[0]].predict(obs[idx], deterministic=True)
+                actions[idx] = _checked(action, policies[idx[0]], n_act, len(idx))
         for i in np.flatnonzero(active).tolist():
+            if i in batched:
+                continue
             action, _ = policies[i].predict(obs[i:i + 1], deterministic=True)
-            action = np.asarray(action, dtype=np.float32)
-            if action.size != n_act:
-                raise ValueError(f"policy {policies[i]!r} returned an action of shape "
-                                 f"{action.shape}; this env needs ({n_act},) per observation")
-            actions[i] = action.reshape(n_act)
+            actions[i] = _checked(action, policies[i], n_act, 1)[0]
+            flag = getattr(policies[i], "last_filter_active", None)
+            if flag is not None:
+                filtered[i].append(bool(flag))
         actions[~active] = 0.0
         obs, reward, terminated, trunc, info = venv.step(actions)
         step += 1
         actions_log.append(actions.copy())
         rewards_log.append(np.array(reward, dtype=float))
-        for key in RECORDED_KEYS:
+        for key in RECORDED_KEYS + (_COMMAND,):
             rows[key].append(np.array(info[key], dtype=float))
         ended = active & (terminated | trunc)
         for i in np.flatnonzero(ended).tolist():
@@ -205,8 +236,11 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
         k = int(end[i])
         arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
         action = acts[:k, i]
-        out.append(Trajectory(**arrays, action=action, command=layout.to_reel_rate(action),
+        command = layout.to_reel_rate(stacked[_COMMAND][1:k + 1, i])
+        out.append(Trajectory(**arrays, action=action, command=command,
                               reward=rews[:k, i], failure=failure[i],
                               truncated=bool(truncated[i]), seed=seeds[i],
-                              settings=dict(settings)))
+                              settings=dict(settings),
+                              filter_active=(np.array(filtered[i], dtype=bool)
+                                             if len(filtered[i]) == k else None)))
     return out

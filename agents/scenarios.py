@@ -44,7 +44,7 @@ class Scenario:
     description : str
         One line for the README and the printed table.
     env_kwargs : dict
-        Arguments of ``gym.make("tether_gym/TetherLibration-v0", ...)``.
+        Arguments of ``gym.make("tether_gym/TetherLibration-v1", ...)``.
     nominal : dict
         ``{"masses": ..., "eccentricity": ...}`` of the model that model-based
         controllers design on, when it differs from the env's (model mismatch).

@@ -46,6 +46,7 @@ class SlidingModeController(ReelRatePolicy):
             raise TypeError(f"model must be a TetherChain, got {type(model).__name__}")
         if model.n_tethers != layout.n_tethers:
             raise ValueError(f"model has {model.n_tethers} tethers, the env {layout.n_tethers}")
+        layout.require_rate_mode(type(self).__name__)
         self.model = model
         self.layout = layout
         self.c = check_range("c", c, 0.0, low_open=True)
@@ -64,7 +65,7 @@ class SlidingModeController(ReelRatePolicy):
         base = env.unwrapped if hasattr(env, "unwrapped") else env
         if not hasattr(base, "config") or not hasattr(base, "model"):
             raise TypeError(f"env must be a TetherLibration env (gym.make("
-                            f"'tether_gym/TetherLibration-v0') or its vector env), got "
+                            f"'tether_gym/TetherLibration-v1') or its vector env), got "
                             f"{type(env).__name__}")
         layout = ObservationLayout.from_env(base)
         model = nominal if nominal is not None else base.model

@@ -1,6 +1,6 @@
 """stable-baselines3 ``VecEnv`` on the native vector env (no DummyVecEnv, no subprocesses).
 
-:func:`make_sb3_vec_env` builds ``gym.make_vec("tether_gym/TetherLibration-v0",
+:func:`make_sb3_vec_env` builds ``gym.make_vec("tether_gym/TetherLibration-v1",
 vectorization_mode="vector_entry_point")`` and wraps it in :class:`TetherSB3VecEnv`,
 which speaks SB3's protocol:
 

@@ -217,7 +217,7 @@ def main(argv=None) -> int:
     rows.append(row("Pendulum-v1 single env (gym.make)", f"{pendulum:,.0f} steps/s", "1x"))
     ratio = rates["single"] / pendulum
     check, text = TARGETS["single"]
-    rows.append(row("TetherLibration-v0 single env (gym.make)", f"{rates['single']:,.0f} steps/s",
+    rows.append(row("TetherLibration-v1 single env (gym.make)", f"{rates['single']:,.0f} steps/s",
                     f"{ratio:.2f}x Pendulum", text, check(ratio)))
 
     # ---- vector env ------------------------------------------------------ #

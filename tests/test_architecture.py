@@ -1,7 +1,10 @@
 """The package's floor plan, checked: imports go downhill only, signatures stay short.
 
-Layers, top to bottom: ``tether_gym_agents`` (agents/) -> ``tether_gym.envs`` ->
-``tether_gym.tasks`` -> ``tether_gym.physics`` -> ``tether_gym.params``. A module may
+Layers, top to bottom: ``tether_gym_agents`` (agents/) -> ``tether_gym.wrappers`` ->
+``tether_gym.safety`` -> ``tether_gym.envs`` -> ``tether_gym.tasks`` ->
+``tether_gym.physics`` -> ``tether_gym.params``. The safety filter sits above the env
+(it predicts the env's step; nothing below may depend on it) and the wrappers above
+both. A module may
 import its own layer and the layers below it; ``tether_gym`` never imports
 ``tether_gym_agents``, stable-baselines3 or torch.
 """
@@ -15,7 +18,7 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "tether_gym"
-LAYERS = ("params", "physics", "tasks", "envs")
+LAYERS = ("params", "physics", "tasks", "envs", "safety", "wrappers")
 FORBIDDEN_EVERYWHERE = ("tether_gym_agents", "agents", "stable_baselines3", "torch")
 MAX_PARAMETERS = 10
 

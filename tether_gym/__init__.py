@@ -1,15 +1,15 @@
 """tether_gym: a Gymnasium benchmark for tethered multi-satellites in elliptic orbits.
 
-Importing the package registers ``tether_gym/TetherLibration-v0``. Heavy modules
+Importing the package registers ``tether_gym/TetherLibration-v1``. Heavy modules
 (numba kernels, environments) load only when used.
 """
 
 from gymnasium.envs.registration import register
 
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 __all__ = ["__version__", "ENV_ID", "DEFAULT_MAX_EPISODE_STEPS"]
 
-ENV_ID = "tether_gym/TetherLibration-v0"
+ENV_ID = "tether_gym/TetherLibration-v1"
 
 DEFAULT_MAX_EPISODE_STEPS = 754
 """Control steps of an episode with the default arguments (3 orbits of 0.025 rad steps).

@@ -1,7 +1,7 @@
 """Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from the environment and the baselines.
 
 ``python evaluate.py paper --out DIR`` (or :func:`main`) runs every study of the
-paper through ``gym.make("tether_gym/TetherLibration-v0", ...)`` with the policies of
+paper through ``gym.make("tether_gym/TetherLibration-v1", ...)`` with the policies of
 this package, writes the figures as PNG files into DIR and a table
 ``paper_vs_tether_gym.md`` (+ ``.json``) that puts every number the paper states
 beside ours, with a verdict. Where docs/model.md explains a

@@ -41,9 +41,11 @@ def run_episode(policy_for_env, orbits: float, options: dict | None = None, seed
     seed : int
         Env seed.
     **env_kwargs
-        Further env arguments.
+        Further env arguments (the paper's laws command reel rates:
+        ``action_mode="rate"`` unless given).
     """
-    venv = make_vector_env(1, dict(env_kwargs, orbits_per_episode=orbits))
+    kwargs = {"action_mode": "rate", **env_kwargs, "orbits_per_episode": orbits}
+    venv = make_vector_env(1, kwargs)
     try:
         return rollout(policy_for_env(venv), [seed], options=options, env=venv)[0]
     finally:

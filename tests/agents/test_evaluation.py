@@ -19,7 +19,7 @@ from tether_gym_agents.trained import pretrained_agents
 
 SHORT = ["--suite", "paper", "--env-kwargs", "orbits_per_episode=0.2"]
 SHORT_KWARGS = {"orbits_per_episode": 0.2}
-needs_sac = pytest.mark.skipif("sac" not in pretrained_agents(), reason="no shipped SAC agent")
+needs_ppo = pytest.mark.skipif("ppo" not in pretrained_agents(), reason="no shipped PPO agent")
 
 
 def _strict_load(text: str):
@@ -104,14 +104,14 @@ def test_seed_folder_is_one_policy_with_several_runs(tmp_path):
 # --------------------------------------------------------------------------- #
 # evaluation that does not move (issue 13)
 # --------------------------------------------------------------------------- #
-@needs_sac
+@needs_ppo
 def test_episodes_do_not_depend_on_seed_count_threads_or_order():
     kwargs = dict(out=None, log=None, env_kwargs={"orbits_per_episode": 0.3})
-    two = evaluation.evaluate(["smc", "random", "sac"], "paper", 2, **kwargs)
-    five = evaluation.evaluate(["sac", "random", "smc"], "paper", 5, torch_threads=2,
+    two = evaluation.evaluate(["smc", "random", "ppo"], "paper", 2, **kwargs)
+    five = evaluation.evaluate(["ppo", "random", "smc"], "paper", 5, torch_threads=2,
                                **kwargs)
     try:
-        for policy in ("smc", "random", "sac"):
+        for policy in ("smc", "random", "ppo"):
             a, b = _episodes(two, policy), _episodes(five, policy)
             assert set(a) <= set(b)
             for key in a:

@@ -24,16 +24,22 @@ LAYOUT = ObservationLayout(n_tethers=2, frequency=1.0, max_reel_rate=0.5)
 
 def _obs(nu, theta=(0.0, 0.0), dtheta=(0.0, 0.0), length=(0.5, 0.5), dlength=(0.0, 0.0),
          amplitude=0.2, params=None):
-    """One observation in the env's layout (4n + 4 entries, + e and M_i with params)."""
-    row = [math.sin(nu), math.cos(nu), *theta, *dtheta, *length, *dlength,
-           amplitude * math.sin(nu), amplitude * math.cos(nu)]
+    """One observation in the env's layout (8n + 4 entries, + e and M_i with params).
+
+    The errors, ln(l / 0.5) and the command (0) follow the reference entries; the laws
+    do not read them.
+    """
+    ref, dref = amplitude * math.sin(nu), amplitude * math.cos(nu)
+    row = [math.sin(nu), math.cos(nu), *theta, *dtheta, *length, *dlength, ref, dref,
+           *(t - ref for t in theta), *(d - dref for d in dtheta),
+           *(math.log(x / 0.5) for x in length), *(0.0 for _ in theta)]
     if params is not None:
         row += list(params)
     return np.array(row, dtype=np.float32)
 
 
 def _make(**kwargs):
-    return gym.make(tether_gym.ENV_ID, max_episode_steps=-1, **kwargs)
+    return gym.make(tether_gym.ENV_ID, max_episode_steps=-1, action_mode="rate", **kwargs)
 
 
 # --------------------------------------------------------------------------- #
@@ -130,7 +136,7 @@ def test_periodic_reel_validation(kwargs, error, match):
 def test_wrong_observation_shape_raises_value_error():
     for policy in (ZeroStateReel(0.2, LAYOUT), PeriodicReel(0.2, 0.2, LAYOUT),
                    RandomPolicy(_make(), seed=0)):
-        with pytest.raises(ValueError, match=r"observation must have shape \(12,\)"):
+        with pytest.raises(ValueError, match=r"observation must have shape \(20,\)"):
             policy.predict(np.zeros(11))
 
 

@@ -78,7 +78,7 @@ def test_paper_trajectories_come_from_the_benchmark_rollout():
     from tether_gym_agents.smc import SlidingModeController
 
     traj = run_smc(0.3, {})
-    venv = make_vector_env(1, {"orbits_per_episode": 0.3})
+    venv = make_vector_env(1, {"orbits_per_episode": 0.3, "action_mode": "rate"})
     same = rollout(SlidingModeController.for_env(venv), [0], env=venv)[0]
     venv.close()
     np.testing.assert_array_equal(traj.theta, same.theta)

@@ -12,7 +12,7 @@ from tether_gym_agents.rollout import RECORDED_KEYS, make_vector_env, rollout
 from tether_gym_agents.smc import SlidingModeController
 
 KWARGS = {"orbits_per_episode": 0.1, "initial_theta": (0.0, 0.0), "init_theta_range": 0.15,
-          "init_dtheta_range": 0.1}
+          "init_dtheta_range": 0.1, "action_mode": "rate"}
 
 
 def test_to_reel_rate_inverts_to_action_inside_the_box():

@@ -33,7 +33,7 @@ def test_converges_in_first_orbit_and_stays_in_default_env():
     """From the Sec. 4.3 state in the default env (accel limit 0.01 m/s^2 on, L0 = 20 km,
     control step 0.025 rad), max|theta - theta_d| falls below 1e-3 rad before the end of
     orbit 1 and stays there to the end of orbit 3, with every tether taut throughout."""
-    env = gym.make(tether_gym.ENV_ID)  # registered time limit = 3 orbits
+    env = gym.make(tether_gym.ENV_ID, action_mode="rate")  # registered time limit = 3 orbits
     cfg = env.unwrapped.config
     assert cfg.accel_limit == 0.01 and cfg.orbits_per_episode == 3.0
     infos, terminated, truncated = _episode(env, SlidingModeController.for_env(env))
@@ -58,7 +58,8 @@ def test_evaluate_policy_gives_finite_rewards():
     from stable_baselines3.common.evaluation import evaluate_policy
     from stable_baselines3.common.monitor import Monitor
 
-    env = Monitor(gym.make(tether_gym.ENV_ID, max_episode_steps=-1, orbits_per_episode=0.1))
+    env = Monitor(gym.make(tether_gym.ENV_ID, max_episode_steps=-1, orbits_per_episode=0.1,
+                           action_mode="rate"))
     policy = SlidingModeController.for_env(env)
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no "not wrapped with a Monitor" or other warning
@@ -70,7 +71,7 @@ def test_evaluate_policy_gives_finite_rewards():
 
 
 def test_batch_and_single_observations_agree():
-    env = gym.make(tether_gym.ENV_ID)
+    env = gym.make(tether_gym.ENV_ID, action_mode="rate")
     obs, _ = env.reset(seed=0)
     obs2, _ = env.step(env.action_space.sample() * 0.0)[:2]
     policy = SlidingModeController.for_env(env)
@@ -85,13 +86,13 @@ def test_batch_and_single_observations_agree():
 @pytest.mark.parametrize("name", ["c", "k", "eps"])
 @pytest.mark.parametrize("value", [0.0, -1.0, math.nan, math.inf])
 def test_bad_gains_raise_value_error_naming_the_value(name, value):
-    env = gym.make(tether_gym.ENV_ID)
+    env = gym.make(tether_gym.ENV_ID, action_mode="rate")
     with pytest.raises(ValueError, match=rf"{name}={value!r}"):
         SlidingModeController.for_env(env, **{name: value})
 
 
 def test_non_numeric_gain_raises_type_error():
-    env = gym.make(tether_gym.ENV_ID)
+    env = gym.make(tether_gym.ENV_ID, action_mode="rate")
     with pytest.raises(TypeError, match="c must be a real number"):
         SlidingModeController.for_env(env, c="1")
 
@@ -104,9 +105,9 @@ def test_model_with_wrong_tether_count_is_rejected():
         SlidingModeController("model", layout)
 
 
-@pytest.mark.parametrize("shape", [(11,), (13,), (1, 11), (2, 3, 12), ()])
+@pytest.mark.parametrize("shape", [(19,), (21,), (1, 19), (2, 3, 20), ()])
 def test_wrong_observation_shape_raises_value_error(shape):
-    env = gym.make(tether_gym.ENV_ID)
+    env = gym.make(tether_gym.ENV_ID, action_mode="rate")
     policy = SlidingModeController.for_env(env)
-    with pytest.raises(ValueError, match=r"observation must have shape \(12,\) or \(B, 12\)"):
+    with pytest.raises(ValueError, match=r"observation must have shape \(20,\) or \(B, 20\)"):
         policy.predict(np.zeros(shape, dtype=np.float32))

@@ -1,40 +1,53 @@
-"""The shipped agents load and act on the default env."""
+"""The shipped agents: safe files only, one folder of seed runs per policy, and they act."""
 
 from __future__ import annotations
+
+import json
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.evaluation import make_policy
-from tether_gym_agents.trained import TrainedAgent, pretrained_agents
+from tether_gym_agents.agent_files import AGENT_FILE, load_agent
+from tether_gym_agents.evaluation import make_policy, resolve_policy
+from tether_gym_agents.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
+
+SHIPPED = ("ppo",)
+"""Policies the package ships (each a folder of seed_K runs)."""
+RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
+             "eval/evaluations.npz")
 
 
-@pytest.mark.parametrize("algo", ["ppo", "sac"])
-def test_shipped_agent_loads_and_acts(algo):
-    shipped = pretrained_agents()
-    assert algo in shipped, f"no shipped {algo} agent in {sorted(shipped)}"
-    for name in ("config.yml", "command.txt", "train_info.json", "agent.json", "policy.safetensors",
-                 "learning_curve.png", "eval/evaluations.npz"):
-        assert (shipped[algo] / name).is_file(), name
-    agent = TrainedAgent.load(shipped[algo])
-    env = gym.make(tether_gym.ENV_ID)
+def test_the_shipped_policies_are_there_without_pickles():
+    assert set(SHIPPED) <= set(pretrained_agents())
+    pickles = sorted(p.name for p in PRETRAINED_DIR.rglob("*") if p.suffix in (".zip", ".pkl"))
+    assert pickles == []
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_every_run_is_complete_and_acts_on_the_current_env(name):
+    spec = resolve_policy(name)
+    assert spec.n_runs >= 5 and all(p.name.startswith("seed_") for p in spec.runs)
+    for run in spec.runs:
+        for file in RUN_FILES:
+            assert (run / file).is_file(), (run, file)
+        _, meta = load_agent(run)
+        assert meta["algo"] == name and meta["env"]["id"] == tether_gym.ENV_ID
+        info = json.loads((run / "train_info.json").read_text())
+        assert info["num_timesteps"] > 0
+    agent = TrainedAgent.load(spec.runs[0])
+    env = gym.make(tether_gym.ENV_ID, **spec.env_kwargs)
     obs, _ = env.reset(seed=0)
-    steps = 0
     for _ in range(200):
         action, _ = agent.predict(obs)
         assert action.shape == env.action_space.shape and np.all(np.abs(action) <= 1.0)
         obs, reward, terminated, truncated, info = env.step(action)
-        steps += 1
-        assert np.isfinite(reward)
-        if terminated or truncated:
-            break
-    assert steps == 200 and info["failure"] is None  # it keeps the chain healthy
-    assert make_policy(algo, env).name == agent.name  # evaluate.py finds it by name
+        assert np.isfinite(reward) and not terminated, info["failure"]
+    assert make_policy(name, env).name == agent.name  # evaluate.py finds it by name
 
 
 def test_agent_rejects_foreign_observation():
-    agent = TrainedAgent.load(pretrained_agents()["ppo"])
+    agent = TrainedAgent.load(resolve_policy(SHIPPED[0]).runs[0])
     with pytest.raises(ValueError, match="does not fit this agent"):
         agent.predict(np.zeros(5, dtype=np.float32))

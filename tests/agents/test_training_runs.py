@@ -88,7 +88,7 @@ def test_user_env_kwargs_reach_the_run(tmp_path, capsys):
 
 def test_nonuniform_config_list_error_names_the_line(tmp_path, capsys):
     cfg = tmp_path / "c.yml"
-    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v0": {
+    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
         "env_kwargs": {"masses": [1.0, 2.0]}}}))
     assert main(["--config", str(cfg), "--out", str(tmp_path / "o"), "--timesteps", "8",
                  "--env-kwargs", "n_bodies=4"]) == 2

@@ -22,7 +22,8 @@ SHORT = {"orbits_per_episode": 0.05}  # 13 steps
 # action +1 pays out until the length leaves its bounds (terminated after 14 steps);
 # other actions reach the end of the 26-step episode (truncated)
 MIXED = {"n_bodies": 2, "max_reel_rate": 2.0, "accel_limit": 0.05,
-         "length_bounds": (0.3, 1.1), "orbits_per_episode": 0.1, "obs_noise": 0.01}
+         "length_bounds": (0.3, 1.1), "orbits_per_episode": 0.1, "obs_noise": 0.01,
+         "action_mode": "rate"}
 
 
 def test_make_sb3_vec_env_is_an_sb3_vec_env():

@@ -100,13 +100,13 @@ def test_defaults_match_registration_and_paper_case():
 
 
 @pytest.mark.parametrize(("n_bodies", "randomised", "dim"),
-                         [(2, False, 8), (3, False, 12), (4, False, 16), (3, True, 15),
-                          (4, True, 20)])
+                         [(2, False, 12), (3, False, 20), (4, False, 28), (3, True, 23),
+                          (4, True, 32)])
 def test_obs_dim_formula(n_bodies, randomised, dim):
     extra = {"mass_range": 0.1} if randomised else {}
     cfg = EnvConfig.from_kwargs(n_bodies=n_bodies, **extra)
     assert cfg.randomised is randomised
-    assert cfg.obs_dim == dim  # 4(N-1) + 4 (+ N when randomised)
+    assert cfg.obs_dim == dim  # 8(N-1) + 4 (+ N when randomised)
 
 
 def test_defaults_for_other_chain_sizes():

@@ -42,7 +42,8 @@ RANDOMISED = {
 @pytest.mark.parametrize("kwargs", [
     {},
     {"n_bodies": 4, "eccentricity_range": (0.1, 0.4), "mass_range": 0.3},
-], ids=["default", "randomised-N4"])
+    {"action_mode": "rate"},
+], ids=["default", "randomised-N4", "rate-mode"])
 def test_check_env_gymnasium_and_sb3(make_env, kwargs):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -65,11 +66,11 @@ def test_spaces(make_env):
     env = make_env(n_bodies=4)
     assert env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
     space = env.observation_space
-    assert space.dtype == np.float32 and space.shape == (4 * 3 + 4,)
+    assert space.dtype == np.float32 and space.shape == (8 * 3 + 4,)
     np.testing.assert_array_equal(space.low[:2], [-1, -1])
     np.testing.assert_array_equal(space.high[:2], [1, 1])
     env_r = make_env(n_bodies=4, mass_range=0.1)
-    assert env_r.observation_space.shape == (4 * 3 + 4 + 4,)
+    assert env_r.observation_space.shape == (8 * 3 + 4 + 4,)
 
 
 def test_no_registered_time_limit(make_env):
@@ -152,7 +153,7 @@ def _env_and_reference(n_bodies, dlength, physics_step):
     dl = np.asarray(dlength, dtype=float)
     step = {} if physics_step is None else {"physics_step": physics_step}
     env = TetherLibrationEnv(n_bodies=n_bodies, accel_limit=None, max_reel_rate=1.0,
-                             orbits_per_episode=1.0, **step)
+                             orbits_per_episode=1.0, action_mode="rate", **step)
     _, info = env.reset(seed=0, options={"dlength": dl})
     infos = [info]
     while True:
@@ -357,7 +358,8 @@ def test_info_keys_and_reward_components(make_env, kwargs):
         assert REWARD_LOW <= reward <= REWARD_HIGH
         assert reward == pytest.approx(sum(info[k] for k in REWARD_COMPONENTS), abs=1e-12)
         assert info["reward_tracking"] >= 0.0
-        assert all(info[k] <= 0.0 for k in REWARD_COMPONENTS[1:])
+        assert info["reward_effort"] <= 0.0 and info["reward_accel"] <= 0.0
+        assert 0.0 <= info["reward_slack"] <= 0.2 and 0.0 <= info["reward_length"] <= 0.2
         assert (info["failure"] is None) == (not terminated)
         rewards.append(reward)
         if terminated or truncated:
@@ -372,7 +374,8 @@ def test_tracking_reward_prefers_the_reference(make_env):
     _, reward_on, _, _, info_on = env.step(np.zeros(2, np.float32))
     _, info = env.reset(seed=0, options={"theta": [0.3, -0.3], "dtheta": [0.2, 0.2]})
     _, reward_off, _, _, info_off = env.step(np.zeros(2, np.float32))
-    assert info_on["reward_tracking"] > 0.9 > 0.1 > info_off["reward_tracking"]
+    # (1 - W) r_track with W = 0.4: 0.6 at perfect tracking
+    assert info_on["reward_tracking"] > 0.9 * 0.6 > 0.2 * 0.6 > info_off["reward_tracking"]
     assert reward_on > reward_off
 
 
@@ -411,7 +414,7 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
     for _ in range(3):
         obs, _, _, _, info = env.step(np.full(n, 0.1, np.float32))
     rows = _documented_layout(n, obs.shape[0])
-    assert obs.shape[0] == 4 * n + 4 + n_bodies  # "4(N-1) + 4 (+ N when randomised)"
+    assert obs.shape[0] == 8 * n + 4 + n_bodies  # "8(N-1) + 4 (+ N when randomised)"
     covered = sorted(i for _, idx in rows for i in idx)
     assert covered == list(range(obs.shape[0]))  # the table covers every entry once
     nu = info["nu"]
@@ -420,6 +423,11 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
         "theta_i": info["theta"], "theta_i'": info["dtheta"],
         "l_i": info["length"], "l_i' (actual reel rates)": info["dlength"],
         "theta_d (reference)": [info["theta_ref"]], "theta_d'": [info["dtheta_ref"]],
+        "e_i = theta_i - theta_d": info["theta"] - info["theta_ref"],
+        "e_i' = theta_i' - theta_d'": info["dtheta"] - info["dtheta_ref"],
+        "ln(l_i / l_i,nom)": np.log(info["length"] / np.asarray(
+            env.unwrapped.config.initial_lengths)),
+        "u_i, the normalised reel-rate command": info["command"],
         "eccentricity e": [info["eccentricity"]],
     }
     labels = []
@@ -434,10 +442,10 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
             assert masses.sum() == pytest.approx(1.0, abs=1e-6) and np.all(masses > 0)
             continue
         np.testing.assert_allclose(obs[idx], expected[key], rtol=0, atol=1e-6, err_msg=label)
-    assert len(labels) == 10 and labels[-1].startswith("mass fractions")
+    assert len(labels) == 14 and labels[-1].startswith("mass fractions")
     # the masses are drawn within (1 +- 0.2) m_i: the fractions' ratios are bounded
     nominal = np.asarray(env.unwrapped.config.masses)
-    ratio = obs[4 * n + 5:] / (nominal / nominal.sum())
+    ratio = obs[8 * n + 5:] / (nominal / nominal.sum())
     assert ratio.max() / ratio.min() <= 1.2 / 0.8 + 1e-6
     assert not np.allclose(ratio, 1.0, atol=1e-3)  # drawn, not nominal
 
@@ -465,3 +473,53 @@ def test_env_step_is_the_public_transition(make_env, kwargs):
     assert info["tension_min"].tobytes() == expected.tension_min.tobytes()
     assert info["ddlength"].tobytes() == expected.derivative[STATE.slices(
         cfg.n_tethers)["dlength"]].tobytes()
+
+
+# --------------------------------------------------------------------------- #
+# action modes (v1)
+# --------------------------------------------------------------------------- #
+def test_increment_mode_integrates_the_command(make_env):
+    """u <- clip(u + 0.25 a, -1, 1), starting from the reels' rate l' / max_reel_rate."""
+    env = make_env()
+    assert env.unwrapped.config.action_mode == "increment"
+    _, info = env.reset(seed=0, options={"dlength": [0.1, -0.6]})
+    u = np.clip(np.array([0.1, -0.6]) / 0.5, -1, 1)
+    np.testing.assert_array_equal(info["command"], u)
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        a = rng.uniform(-1.5, 1.5, 2).astype(np.float32)  # outside the box: clipped first
+        obs, _, terminated, _, info = env.step(a)
+        u = np.clip(u + 0.25 * np.clip(a.astype(float), -1, 1), -1, 1)
+        np.testing.assert_array_equal(info["command"], u)
+        np.testing.assert_array_equal(obs[-2:], u.astype(np.float32))
+        assert not terminated
+
+
+def test_modes_share_the_physics(make_env):
+    """The same commands give bit-identical states in both modes."""
+    inc = make_env(init_theta_range=0.1)
+    rate = make_env(init_theta_range=0.1, action_mode="rate")
+    _, i_inc = inc.reset(seed=4)
+    _, i_rate = rate.reset(seed=4)
+    u = np.array(i_inc["command"])
+    rng = np.random.default_rng(0)
+    for _ in range(100):
+        a = rng.uniform(-0.2, 0.2, 2)
+        target = np.clip(u + 0.25 * a, -1, 1)
+        _, r_inc, _, _, i_inc = inc.step(a)
+        _, r_rate, _, _, i_rate = rate.step(target)
+        u = target
+        for key in ("theta", "dtheta", "length", "dlength", "tension", "command"):
+            np.testing.assert_array_equal(i_inc[key], i_rate[key], err_msg=key)
+        assert r_inc == r_rate
+
+
+@pytest.mark.parametrize(("kwargs", "match"), [
+    ({"action_mode": "delta"}, "action_mode='delta' must be one of"),
+    ({"action_mode": 1}, "action_mode=1 must be one of"),
+    ({"increment_gain": 0.0}, "increment_gain"),
+    ({"increment_gain": 3.0}, "increment_gain"),
+])
+def test_action_arguments_validated(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        TetherLibrationEnv(**kwargs)

@@ -95,6 +95,8 @@ def step_config(config: EnvConfig) -> StepConfig:
     lo, hi = config.episode.length_bounds
     return StepConfig(
         max_reel_rate=float(config.reels.max_rate),
+        incremental=config.action.mode == "increment",
+        increment_gain=float(config.action.increment_gain),
         substeps=Substeps(float(config.episode.physics_step), config.n_substeps),
         amplitude=float(config.reference.amplitude),
         frequency=float(config.reference.frequency),
@@ -133,7 +135,7 @@ class ChainBatch:
             derivative=np.zeros((num, m)),
             info_s=np.zeros((N_INFO_SCALARS, num)), info_v=np.zeros((N_INFO_VECTORS, num, n)),
             steps=np.zeros(num, dtype=np.int64), nu_end=np.zeros(num),
-            truncated=np.zeros(num, dtype=np.bool_))
+            truncated=np.zeros(num, dtype=np.bool_), command=np.zeros((num, n)))
         self.cfg = step_config(config)
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
         # standard uniform / normal variates of each draw, and their rows as views

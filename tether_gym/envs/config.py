@@ -1,6 +1,6 @@
 """Validated configuration of the libration environments (single and vector).
 
-``EnvConfig.from_kwargs(**kwargs)`` is what ``gym.make("tether_gym/TetherLibration-v0",
+``EnvConfig.from_kwargs(**kwargs)`` is what ``gym.make("tether_gym/TetherLibration-v1",
 **kwargs)`` goes through: the flat keyword names (the env docstring's Arguments
 table) are mapped onto small validated parts (:data:`FLAT_NAMES`, the one list of
 them), unknown names are rejected with the list of valid ones and every value is
@@ -31,8 +31,8 @@ from ..physics import Scales, TetherChain
 from ..tasks.reward import RewardWeights
 from .layout import OBSERVATION
 
-__all__ = ["EnvConfig", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
-           "PAPER_INITIAL_THETA"]
+__all__ = ["EnvConfig", "Action", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
+           "PAPER_INITIAL_THETA", "ACTION_MODES"]
 
 PAPER_INITIAL_THETA = 0.1
 """theta_1(0) [rad] of the paper's Sec. 4.3 case (the other tethers start at 0)."""
@@ -77,6 +77,34 @@ class Reference:
     def __post_init__(self) -> None:
         check_range("amplitude", self.amplitude, 0.0, 1.0, high_open=True)
         check_range("frequency", self.frequency, 0.0)
+
+
+ACTION_MODES = ("increment", "rate")
+"""Values of ``action_mode``."""
+
+
+@dataclass(frozen=True)
+class Action:
+    """What an action means.
+
+    Parameters
+    ----------
+    mode : str
+        ``"increment"``: the action changes the normalised reel-rate command,
+        u <- clip(u + increment_gain * a, -1, 1); ``"rate"``: the action is the
+        command, u = clip(a, -1, 1) (v0's action, and the paper's control input).
+        Either way l'_cmd = u * max_reel_rate.
+    increment_gain : float
+        Largest change of u per control step [-], in (0, 2] (``"increment"`` only).
+    """
+
+    mode: str = "increment"
+    increment_gain: float = 0.25
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.mode, str) or self.mode not in ACTION_MODES:
+            raise ValueError(f"action_mode={self.mode!r} must be one of {ACTION_MODES}")
+        check_range("increment_gain", self.increment_gain, 0.0, 2.0, low_open=True)
 
 
 @dataclass(frozen=True)
@@ -202,6 +230,7 @@ _PARTS: dict[str, tuple[type, dict[str, str]]] = {
     "reels": (ReelParams, {"accel_limit": "accel_limit", "speed_limit": "speed_limit",
                            "reel_time_constant": "time_constant",
                            "max_reel_rate": "max_rate"}),
+    "action": (Action, {"action_mode": "mode", "increment_gain": "increment_gain"}),
     "reference": (Reference, {"amplitude": "amplitude", "frequency": "frequency"}),
     "episode": (Episode, {"initial_nu": "initial_nu", "initial_theta": "initial_theta",
                           "control_step": "control_step", "physics_step": "physics_step",
@@ -229,6 +258,7 @@ class EnvConfig:
     orbit: OrbitParams = field(default_factory=OrbitParams)
     chain: ChainParams = field(default_factory=ChainParams)
     reels: ReelParams = field(default_factory=ReelParams)
+    action: Action = field(default_factory=Action)
     reference: Reference = field(default_factory=Reference)
     episode: Episode = field(default_factory=Episode)
     randomisation: Randomisation = field(default_factory=Randomisation)

@@ -20,7 +20,7 @@ import operator
 import numpy as np
 
 from ..physics.layout import Field, Layout
-from ..tasks.reward import COMPONENTS
+from ..tasks.reward import COMPONENTS, MARGINS, PENALTIES
 from ..tasks.termination import Failure
 
 __all__ = ["OBSERVATION", "INFO", "O", "I", "INFO_KEYS", "info_dict", "observation_bounds",
@@ -35,13 +35,19 @@ OBSERVATION = Layout("observation", (
     Field("dlength", True, "[-]", "l_i' (actual reel rates)"),
     Field("theta_ref", False, "[rad]", "theta_d (reference)"),
     Field("dtheta_ref", False, "[rad/rad]", "theta_d' (reference)"),
+    Field("error", True, "[rad]", "e_i = theta_i - theta_d"),
+    Field("derror", True, "[rad/rad]", "e_i' = theta_i' - theta_d'"),
+    Field("log_length", True, "[-]", "ln(l_i / l_i,nom)"),
+    Field("command", True, "[-]", "u_i, the normalised reel-rate command in force", -1.0, 1.0),
     Field("eccentricity", False, "[-]", "eccentricity e", optional="params"),
     Field("mass_fractions", True, "[-]", "mass fractions M_i", optional="params"),
 ))
 O = OBSERVATION.index
 """Offsets of the observation's fields."""
 
-_COMPONENT_DOCS = {"reward_tracking": "r_track, the tracking factor of the reward"}
+_COMPONENT_DOCS = {"reward_tracking": "(1 - W) r_track, the tracking part of the reward",
+                   **{f"reward_{name}": "reward penalty (<= 0)" for name in PENALTIES},
+                   **{f"reward_{name}": "reward margin term (>= 0)" for name in MARGINS}}
 
 INFO = Layout("info", (
     Field("nu", False, "[rad]", "true anomaly (not wrapped)"),
@@ -55,9 +61,10 @@ INFO = Layout("info", (
     Field("theta_ref", False, "[rad]", "theta_d"),
     Field("dtheta_ref", False, "[rad/rad]", "theta_d'"),
     Field("reel_accel", True, "[m/s^2]", "physical reel accelerations L_ddot"),
+    Field("command", True, "[-]", "u_i, normalised reel-rate command of the step"),
     Field("eccentricity", False, "[-]", "e of the episode"),
     Field("failure", False, "[-]", "None, or why the episode terminated"),
-) + tuple(Field(name, False, "[-]", _COMPONENT_DOCS.get(name, "reward penalty (<= 0)"))
+) + tuple(Field(name, False, "[-]", _COMPONENT_DOCS[name])
           for name in COMPONENTS))
 I = INFO.index  # noqa: E741 - the info layout's index, beside O
 """Buffer index of each info entry: ``scalars[I.nu[0]]``, ``vectors[I.theta[1]]``."""

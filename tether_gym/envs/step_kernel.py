@@ -26,17 +26,22 @@ from ..physics.layout import at
 from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
 from ..tasks.reference import desired_libration_jit
-from ..tasks.reward import PENALTIES, RewardParams, penalty_terms, reward_terms
+from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
 from ..tasks.termination import KEEP_PREVIOUS, failure_code
 from .layout import I, O
 
 __all__ = ["StepConfig", "Rows", "RowWork", "make_row_work", "step_rows"]
 
+LENGTH_FLOOR = 1.0e-6
+"""Smallest l [-] whose logarithm the observation takes (a noisy l can reach 0)."""
+
 
 class StepConfig(NamedTuple):
     """Constants of one batch (from its :class:`~tether_gym.envs.config.EnvConfig`)."""
 
-    max_reel_rate: float          # l'_cmd at |action| = 1 [-]
+    max_reel_rate: float          # l'_cmd at |u| = 1 [-]
+    incremental: bool             # action_mode "increment": u <- clip(u + gain a, -1, 1)
+    increment_gain: float         # gain [-] of the increments
     substeps: kernels.Substeps    # RK4 steps per control step
     amplitude: float              # A [rad] of theta_d = A sin(w nu)
     frequency: float              # w [-]
@@ -46,7 +51,7 @@ class StepConfig(NamedTuple):
     accel_scale: float            # L0 n^2 [m/s^2] of info["reel_accel"]
     with_params: bool             # e and M_i close the observation
     reward: RewardParams
-    length_nominal: np.ndarray    # (n,) l_i,nom [-] of the length penalty
+    length_nominal: np.ndarray    # (n,) l_i,nom [-] of the length term and observation
 
 
 class Rows(NamedTuple):
@@ -59,7 +64,7 @@ class Rows(NamedTuple):
     noise: np.ndarray        # (B, m) observation noise on the state entries
     obs: np.ndarray          # (B, obs_dim) float32 observations (OBSERVATION layout)
     reward: np.ndarray       # (B,)
-    components: np.ndarray   # (B, 1 + len(PENALTIES))
+    components: np.ndarray   # (B, 1 + len(TERMS))
     failure: np.ndarray      # (B,) int64 Failure codes
     tension_min: np.ndarray  # (B, n)
     tension: np.ndarray      # (B, n) T^ at the end of the step
@@ -69,6 +74,7 @@ class Rows(NamedTuple):
     steps: np.ndarray        # (B,) int64 control steps since the reset
     nu_end: np.ndarray       # (B,) true anomaly at which the episode is truncated [rad]
     truncated: np.ndarray    # (B,) bool: nu has reached nu_end
+    command: np.ndarray      # (B, n) normalised reel-rate command u in [-1, 1] [-]
 
 
 class RowWork(NamedTuple):
@@ -76,23 +82,22 @@ class RowWork(NamedTuple):
 
     physics: kernels.Scratch
     command: np.ndarray   # (n,) l'_cmd [-]
-    action: np.ndarray    # (n,) clipped action
     zero: np.ndarray      # (n,) zeros (no disturbance at reset)
     accel: np.ndarray     # (n,) L_ddot / a_ref
     previous: np.ndarray  # (m,) state before the step
-    penalty: np.ndarray   # (len(PENALTIES),) per-term sums
+    terms: np.ndarray     # (len(TERMS),) per-term sums
 
 
 @njit(**KERNEL)
-def make_row_work(n, n_penalties):
+def make_row_work(n, n_terms):
     """Fresh :class:`RowWork` for n tethers."""
-    return RowWork(kernels.make_scratch(n), np.empty(n), np.empty(n), np.zeros(n), np.empty(n),
-                   np.empty(4 * n), np.empty(n_penalties))
+    return RowWork(kernels.make_scratch(n), np.empty(n), np.zeros(n), np.empty(n),
+                   np.empty(4 * n), np.empty(n_terms))
 
 
 def new_row_work(n: int) -> RowWork:
     """:func:`make_row_work` for the declared reward terms."""
-    return make_row_work(n, len(PENALTIES))
+    return make_row_work(n, len(TERMS))
 
 
 @njit(**INLINE)
@@ -128,6 +133,12 @@ def write_outputs(b, rows, cfg, anomaly):
             out[at(field, n) + j] = y[i] + noise[i]
     out[at(O.theta_ref, n)] = ref
     out[at(O.dtheta_ref, n)] = dref
+    for j in range(n):
+        out[at(O.error, n) + j] = out[at(O.theta, n) + j] - ref
+        out[at(O.derror, n) + j] = out[at(O.dtheta, n) + j] - dref
+        out[at(O.log_length, n) + j] = math.log(max(out[at(O.length, n) + j], LENGTH_FLOOR)
+                                                / cfg.length_nominal[j])
+        out[at(O.command, n) + j] = rows.command[b, j]
     if cfg.with_params:
         out[at(O.eccentricity, n)] = ecc
         for j in range(n):
@@ -152,6 +163,7 @@ def write_outputs(b, rows, cfg, anomaly):
         v[I.ddlength[1], b, j] = der[dl + j]
         v[I.tension[1], b, j] = rows.tension[b, j]
         v[I.tension_min[1], b, j] = rows.tension_min[b, j]
+        v[I.command[1], b, j] = rows.command[b, j]
         v[I.reel_accel[1], b, j] = cfg.accel_scale * reel_accel(k, sn, ecc, y[dl + j],
                                                                 der[dl + j])
 
@@ -187,24 +199,24 @@ def _task(b, cfg, work, rows, anomaly):
     for j in range(n):
         work.accel[j] = reel_accel(k, sn, ecc, y[dl + j], rows.derivative[b, dl + j]) \
             / cfg.accel_ref
-    penalty_terms(y, n, work.action, work.accel, rows.tension_min[b], cfg.length_nominal,
-                  cfg.reward, work.penalty)
-    rows.reward[b] = reward_terms(y, n, ref, dref, cfg.reward, work.penalty,
-                                  rows.components[b])
+    term_sums(y, n, rows.command[b], work.accel, rows.tension_min[b], cfg.length_nominal,
+              cfg.reward, work.terms)
+    rows.reward[b] = reward_terms(y, n, ref, dref, cfg.reward, work.terms, rows.components[b])
 
 
 @njit(nogil=True, **LOOP)
 def step_rows(index, action, rows, cfg, work, reset):
     """One control step of the rows listed in ``index`` (int64), in place; others untouched.
 
-    ``action`` (B, n) holds the normalised reel-rate commands, clipped to [-1, 1]
-    (l'_cmd = action * max_reel_rate). Returns -1, or, before anything is stepped,
-    the first listed row whose action is NaN or inf (then no row is touched). With
-    ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
+    ``action`` (B, n) holds the actions, clipped to [-1, 1]; they set the normalised
+    command u (``rows.command``): u = action, or u <- clip(u + gain * action, -1, 1)
+    with ``cfg.incremental``; l'_cmd = u * max_reel_rate. Returns -1, or, before
+    anything is stepped, the first listed row whose action is NaN or inf (then no row
+    is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
     ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at their
     initial state with the reels holding their rate (the state the first step starts
-    from), their observation and info entries, and zero steps; their reward
-    components must be zero.
+    from), their observation and info entries, zero steps and the command u = clip(l' /
+    max_reel_rate, -1, 1) (the reels' rate); their reward components must be zero.
 
     A row whose state turns non-finite keeps its previous state (so nothing
     non-finite reaches the observation) and gets failure code 1 and reward 0.
@@ -226,6 +238,7 @@ def step_rows(index, action, rows, cfg, work, reset):
         if reset:  # evaluate only: the reels hold their rate, no disturbance
             for j in range(n):
                 work.command[j] = yb[at(S.dlength, n) + j]
+                rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0), 1.0)
             inputs = kernels.StepInputs(work.command, work.zero)
             substeps = no_steps
         else:
@@ -233,7 +246,9 @@ def step_rows(index, action, rows, cfg, work, reset):
                 work.previous[k] = yb[k]
             for j in range(n):
                 a = min(max(action[b, j], -1.0), 1.0)
-                work.action[j] = a
+                if cfg.incremental:
+                    a = min(max(rows.command[b, j] + cfg.increment_gain * a, -1.0), 1.0)
+                rows.command[b, j] = a
                 work.command[j] = a * cfg.max_reel_rate
             inputs = kernels.StepInputs(work.command, rows.disturbance[b])
             substeps = cfg.substeps

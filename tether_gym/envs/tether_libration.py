@@ -1,4 +1,4 @@
-"""The Gymnasium environment ``tether_gym/TetherLibration-v0``."""
+"""The Gymnasium environment ``tether_gym/TetherLibration-v1``."""
 
 from __future__ import annotations
 
@@ -73,43 +73,60 @@ class TetherLibrationEnv(gym.Env):
 
     ## Action Space
 
-    ``Box(-1, 1, (N-1,), float32)``: the normalised reel-rate command of each tether,
-    clipped to [-1, 1] and mapped to l'_cmd,i = action_i * ``max_reel_rate`` [-]. The
-    reels follow it as a first-order lag (``reel_time_constant``) saturated at the
-    physical acceleration limit ``accel_limit`` (physics.reel). A NaN or inf action
-    raises ValueError.
+    ``Box(-1, 1, (N-1,), float32)``, clipped to [-1, 1]. It sets the normalised
+    reel-rate command u in [-1, 1]^(N-1), which maps to l'_cmd,i = u_i *
+    ``max_reel_rate`` [-]:
 
-    | Index | Action                        | Min | Max |
-    |-------|-------------------------------|-----|-----|
-    | i     | reel-rate command of tether i | -1  | 1   |
+    * ``action_mode="increment"`` (default): the action is a change of the command,
+      u_i <- clip(u_i + ``increment_gain`` * action_i, -1, 1) (gain 0.25). At reset u
+      is the reels' rate, clip(l'/``max_reel_rate``, -1, 1).
+    * ``action_mode="rate"``: the action is the command, u_i = action_i (v0's action,
+      and the paper's control input; the sliding-mode baseline runs in this mode).
+
+    The reels follow l'_cmd as a first-order lag (``reel_time_constant``) saturated at
+    the physical acceleration limit ``accel_limit``. A NaN or inf action raises
+    ValueError.
+
+    | Index | Action ("increment" / "rate")                 | Min | Max |
+    |-------|-----------------------------------------------|-----|-----|
+    | i     | change of u_i / reel-rate command u_i         | -1  | 1   |
 
     ## Observation Space
 
-    ``Box(float32)`` of size 4(N-1) + 4, plus N when e and the masses are observed
+    ``Box(float32)`` of size 8(N-1) + 4, plus N when e and the masses are observed
     (``observe_params``; by default exactly when they are randomised):
 
     {observation_table}
 
-    (n = N-1.) With the frequency w known, (nu, theta, theta', l, l') is the full
+    (n = N-1.) With the frequency w known, (nu, theta, theta', l, l', u) is the full
     state, so the observation is Markov. ``obs_noise`` adds Gaussian noise of that
-    standard deviation to the theta, theta', l and l' entries.
+    standard deviation to the theta, theta', l and l' entries (and so to the errors
+    and ln l computed from them).
 
     ## Rewards
 
-    With e_i = theta_i - theta_d, e_i' = theta_i' - theta_d', the action a and the
-    weights of ``reward_weights`` (defaults in brackets):
+    With e_i = theta_i - theta_d, e_i' = theta_i' - theta_d', the cost c = mean(e_i^2)
+    + 0.1 mean(e_i'^2), the command u and the weights of ``reward_weights``
+    (defaults in brackets):
 
-        r = r_track * (1 - p),    r_track = 1 / (1 + (mean e_i^2 + 0.1 mean e_i'^2) / sigma^2)
-        p = w_effort mean(a_i^2)                              reel effort [0.05]
-          + w_accel mean(min(1, (L_ddot_i / a_ref)^2))        harsh reel accelerations [0.05]
-          + w_slack mean(clip(1 - T^_i,min / T_safe, 0, 1)^2) closeness to slack [0.2, T_safe 0.5]
-          + w_length mean(min(1, ((l_i - l_i,nom) / 0.5)^2))  length drift [0.2]
+        r = (1 - W) r_track (1 - p) + w_slack (1 - q_slack) + w_length (1 - q_length),
+        W = w_slack + w_length,
+        r_track = (1 - s) / (1 + c / sigma^2) + s clip(ln(sqrt(c)) / ln(1e-4), 0, 1)
+                                                  [s = log_share 0.5, sigma 0.05 rad]
+        p = w_effort mean(u_i^2) + w_accel mean(min(1, (L_ddot_i / a_ref)^2))  [0.05, 0]
+        q_slack  = mean(clip(1 - T^_i,min / T_safe, 0, 1)^2)         [w 0.2, T_safe 0.5]
+        q_length = mean(min(1, h(ln(l_i / l_i,nom)) / h(ln 10)))     [w 0.2]
+        h(x) = sqrt(1 + (x / 0.2)^2) - 1
 
-    with sigma = 0.05 rad, a_ref the acceleration limit (0.01 m/s^2 without one) and
-    l_i,nom = ``initial_lengths``. r lies in [0, 1] (the weights sum to at most 1), so
-    ending an episode early never pays. ``info`` holds ``reward_tracking`` = r_track
-    and the penalties ``reward_effort``, ``reward_accel``, ``reward_slack``,
-    ``reward_length`` (each -r_track times its term, <= 0); they add up to r.
+    with a_ref the acceleration limit (0.01 m/s^2 without one) and l_i,nom =
+    ``initial_lengths``. The logarithmic part of r_track pays equally for every decade
+    of tracking precision down to 1e-4 rad; the margin terms are added, so their
+    gradient does not depend on the tracking. r lies in [0, 1], so ending an episode
+    early never pays. ``info`` holds the components, which add up to r:
+    ``reward_tracking`` = (1 - W) r_track, the penalties ``reward_effort`` and
+    ``reward_accel`` (<= 0) and the margin terms ``reward_slack`` and
+    ``reward_length`` (in [0, w]). docs/task_design.md gives the reasons and the
+    ablation behind each choice.
 
     ## Starting State
 
@@ -136,7 +153,7 @@ class TetherLibrationEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("tether_gym/TetherLibration-v0", **kwargs)``; unknown names raise
+    ``gym.make("tether_gym/TetherLibration-v1", **kwargs)``; unknown names raise
     ValueError with the list of valid ones.
 
     | Argument             | Default        | Meaning                                         |
@@ -154,7 +171,9 @@ class TetherLibrationEnv(gym.Env):
     | amplitude, frequency | 0.2, 1         | A [rad] and w [-] of theta_d = A sin(w nu)      |
     | control_step         | 0.025          | true anomaly per env step [rad]                 |
     | physics_step         | 0.0125         | RK4 step [rad]; divides control_step            |
-    | max_reel_rate        | 0.5            | l'_cmd at abs(action) = 1 [-]                   |
+    | max_reel_rate        | 0.5            | l'_cmd at abs(u) = 1 [-]                        |
+    | action_mode          | "increment"    | "increment" or "rate" (Action Space)            |
+    | increment_gain       | 0.25           | largest change of u per step [-], (0, 2]        |
     | accel_limit          | 0.01           | reel acceleration limit [m/s^2]; None: off      |
     | speed_limit          | None           | reel speed limit [m/s]                          |
     | reel_time_constant   | 0.0125         | reel lag tau [rad] (>= physics_step / 2)        |
@@ -180,6 +199,20 @@ class TetherLibrationEnv(gym.Env):
 
     ## Version History
 
+    * v1 (tether_gym 0.3.0): a task that rewards what the benchmark measures
+      (docs/task_design.md has the ablation over training seeds behind each change).
+      Actions are increments of the reel-rate command by default
+      (``action_mode="rate"`` gives v0's direct command): i.i.d. exploration noise on
+      a direct command makes every step a burst at the acceleration limit, which
+      drove v0 agents to reel out to the length bound. The observation adds the
+      tracking errors, ln(l / l_nom) and the command in force (Markov with
+      increments). The reward adds a logarithmic tracking part that keeps paying
+      down to 1e-4 rad, makes the slack and length terms additive (the length term a
+      pseudo-Huber function of ln(l / l_nom), with a gradient everywhere) and
+      penalises the effort of the command u rather than of the action; ``info``
+      adds ``command``. Physics, termination, starting states and arguments are
+      unchanged, as are the trajectories for the same reel commands. v0 is no
+      longer registered (``gym.make`` of v0 names v1).
     * v0: initial release. tether_gym 0.2.0 keeps v0: with every configuration that
       worked before, trajectories, observations, terminations and info entries are
       bitwise those of 0.1.0, except that the reel acceleration is now computed by one

@@ -1,6 +1,6 @@
-"""The native vector environment of ``tether_gym/TetherLibration-v0``.
+"""The native vector environment of ``tether_gym/TetherLibration-v1``.
 
-``gym.make_vec("tether_gym/TetherLibration-v0", num_envs=n, **kwargs)`` builds a
+``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=n, **kwargs)`` builds a
 :class:`TetherLibrationVectorEnv`: one :class:`~tether_gym.envs.batch.ChainBatch` of n
 rows advanced by the same compiled step as the single env, so sub-env i produces
 exactly the trajectory of a :class:`~tether_gym.envs.TetherLibrationEnv` seeded and
@@ -69,7 +69,7 @@ class TetherLibrationVectorEnv(VectorEnv):
 
     The task, spaces, rewards, termination and arguments are those of
     :class:`~tether_gym.envs.TetherLibrationEnv` (see its docstring); this class only
-    batches them. Build it with ``gym.make_vec("tether_gym/TetherLibration-v0",
+    batches them. Build it with ``gym.make_vec("tether_gym/TetherLibration-v1",
     num_envs=n, **kwargs)`` (``vectorization_mode`` defaults to the vector entry point).
 
     ## Spaces

@@ -1,0 +1,47 @@
+"""The float64 NumPy forward pass: SB3's deterministic action, bitwise batch-invariant."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import tether_gym
+from tether_gym_agents.mlp import NumpyMLP
+
+
+def _model(algo, **kwargs):
+    from stable_baselines3 import PPO, SAC
+
+    env = gym.make(tether_gym.ENV_ID)
+    if algo == "ppo":
+        return PPO("MlpPolicy", env, seed=0, device="cpu",
+                   policy_kwargs={"net_arch": [64, 64]}, **kwargs)
+    return SAC("MlpPolicy", env, seed=0, device="cpu", policy_kwargs={"net_arch": [32, 32]},
+               **kwargs)
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_matches_sb3_and_is_batch_invariant(algo):
+    model = _model(algo)
+    mlp = NumpyMLP.from_policy(model.policy)
+    assert mlp is not None
+    rng = np.random.default_rng(0)
+    obs = rng.normal(0.0, 2.0, size=(37, 20)).astype(np.float32)
+    expected = model.predict(obs, deterministic=True)[0]
+    got = mlp(obs)
+    # SB3 runs in float32, NumPy in float64: equal to float32 rounding
+    np.testing.assert_allclose(got, expected, rtol=0, atol=2e-6)
+    assert np.abs(got).max() > 0.01  # a real output, not all zero or clipped
+    # row i is bitwise the same alone, in batches of any size and beside any rows
+    alone = np.array([mlp(obs[i:i + 1])[0] for i in range(len(obs))])
+    assert np.array_equal(got, alone)
+    for size in (2, 5, 16):
+        other = rng.normal(size=(size - 1, 20)).astype(np.float32)
+        batch = mlp(np.concatenate([obs[3:4], other]))
+        assert np.array_equal(batch[0], alone[3])
+
+
+def test_unsupported_networks_fall_back():
+    model = _model("ppo", use_sde=True)
+    assert NumpyMLP.from_policy(model.policy) is None
