@@ -454,4 +454,9 @@ def run_from_args(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     failed = [r for r in results if r["status"] == "failed"]
     print(f"{len(results) - len(failed)}/{len(results)} seeds complete in {out} "
           f"({time.perf_counter() - t0:.0f} s)")
+    from .training import plot_seed_learning_curves
+
+    plot = plot_seed_learning_curves(out)
+    if plot is not None:
+        print(f"learning curves of every seed: {plot}")
     return 1 if failed else 0

@@ -39,7 +39,7 @@ from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from .jsonio import to_jsonable
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
-           "plot_learning_curve", "ConfigError", "CONFIG_DIR"]
+           "plot_learning_curve", "plot_seed_learning_curves", "ConfigError", "CONFIG_DIR"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
@@ -220,6 +220,53 @@ def plot_learning_curve(run_dir: Path) -> Path | None:
     ax_len.set_ylabel("episode length")
     ax_len.set_xlabel("env steps")
     out = Path(run_dir) / "learning_curve.png"
+    fig.savefig(out, dpi=100)
+    return out
+
+
+def plot_seed_learning_curves(folder: Path) -> Path | None:
+    """Write ``learning_curves.png`` for a folder of ``seed_K`` runs; None if none plots.
+
+    Each seed's mean evaluation return against env steps (thin lines), and the
+    interquartile mean over the seeds with its min-max band on the steps every seed
+    has reached (evaluations at the same step counts, as the fan-out's runs have).
+    None without matplotlib or without two runs holding ``eval/evaluations.npz``.
+    """
+    import numpy as np
+    from scipy.stats import trim_mean
+
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        return None
+    curves = {}
+    for run in sorted(Path(folder).glob("seed_*"), key=lambda p: int(p.name[5:])
+                      if p.name[5:].isdigit() else -1):
+        path = run / "eval" / "evaluations.npz"
+        if path.is_file():
+            data = np.load(path)
+            curves[run.name] = (data["timesteps"], data["results"].mean(axis=1))
+    if len(curves) < 2:
+        return None
+    common = sorted(set.intersection(*(set(t.tolist()) for t, _ in curves.values())))
+    fig = Figure(figsize=(7, 4), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax = fig.subplots()
+    for name, (steps, ret) in curves.items():
+        ax.plot(steps, ret, lw=0.7, alpha=0.5, label=None)
+    if common:
+        table = np.array([[ret[steps.tolist().index(t)] for t in common]
+                          for steps, ret in curves.values()])
+        ax.plot(common, trim_mean(table, 0.25, axis=0), color="k", lw=2,
+                label=f"IQM over {len(curves)} seeds")
+        ax.fill_between(common, table.min(axis=0), table.max(axis=0), color="k", alpha=0.1,
+                        label="min-max over seeds")
+        ax.legend()
+    ax.set_xlabel("env steps")
+    ax.set_ylabel("mean evaluation return")
+    ax.set_title(f"{Path(folder).name}: deterministic evaluation episodes, every seed")
+    out = Path(folder) / "learning_curves.png"
     fig.savefig(out, dpi=100)
     return out
 

@@ -157,3 +157,18 @@ def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
     assert (out / "final_replay_buffer.pkl").is_file()
     text = capsys.readouterr().out
     assert "final_model.zip at step 512 with its replay buffer (512 transitions)" in text
+
+
+def test_seed_learning_curves(tmp_path):
+    """One plot of every seed's evaluation curve; needs two runs with evaluations."""
+    pytest.importorskip("matplotlib")
+    from tether_gym_agents.training import plot_seed_learning_curves
+
+    steps = np.array([100, 200, 300])
+    for k in range(3):
+        (tmp_path / f"seed_{k}" / "eval").mkdir(parents=True)
+        np.savez(tmp_path / f"seed_{k}" / "eval" / "evaluations.npz", timesteps=steps[:2 + k // 2],
+                 results=np.ones((2 + k // 2, 5)) * k, ep_lengths=np.ones((2 + k // 2, 5)))
+    assert plot_seed_learning_curves(tmp_path / "seed_0") is None  # no seed folders inside
+    out = plot_seed_learning_curves(tmp_path)
+    assert out == tmp_path / "learning_curves.png" and out.stat().st_size > 1000
