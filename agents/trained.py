@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 
-from .mlp import NumpyMLP
 from .agent_files import (
     AGENT_FILE,
     PICKLED_MODEL_FILES,
@@ -27,6 +26,7 @@ from .agent_files import (
     load_agent,
     load_pickled_run,
 )
+from .mlp import NumpyMLP
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
            "RUN_AGENT_DIRS", "find_unit"]
