@@ -253,7 +253,7 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     fig = Figure(figsize=(7, 4), layout="constrained")
     FigureCanvasAgg(fig)
     ax = fig.subplots()
-    for name, (steps, ret) in curves.items():
+    for steps, ret in curves.values():
         ax.plot(steps, ret, lw=0.7, alpha=0.5, label=None)
     if common:
         table = np.array([[ret[steps.tolist().index(t)] for t in common]
