@@ -473,8 +473,44 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
                       training=training)
 
 
+EXPORTED_FILES = (AGENT_FILE, WEIGHTS_FILE, "config.yml", "args.yml", "command.txt",
+                  "train_info.json", "learning_curve.png", "eval/evaluations.npz")
+"""What :func:`export_runs` copies of a run folder: the safe agent, how it was trained
+and its learning curve (no pickles, checkpoints, TensorBoard files or logs)."""
+EXPORTED_FOLDER_FILES = ("learning_curves.png", "fanout.log")
+"""What it copies of a folder of seed runs besides the runs."""
+
+
+def export_runs(src, dest) -> list[Path]:
+    """Copy the shareable files of a run folder, or of every ``seed_K`` run in a folder.
+
+    Only :data:`EXPORTED_FILES` (and the folder's :data:`EXPORTED_FOLDER_FILES`) are
+    copied; every run must hold a safe agent (``agent.json`` + ``policy.safetensors``).
+    Returns the run folders written. Raises AgentLoadError naming a run without one.
+    """
+    import shutil
+
+    src, dest = Path(src), Path(dest)
+    runs = sorted((p for p in src.glob("seed_*") if p.is_dir()), key=lambda p: p.name)
+    pairs = [(run, dest / run.name) for run in runs] if runs else [(src, dest)]
+    for run, _ in pairs:
+        if not is_unit(run):
+            raise AgentLoadError(f"{run} holds no safe agent ({AGENT_FILE} + {WEIGHTS_FILE}); "
+                                 "convert it first")
+    for run, out in pairs:
+        for name in EXPORTED_FILES:
+            if (run / name).is_file():
+                (out / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(run / name, out / name)
+    if runs:
+        for name in EXPORTED_FOLDER_FILES:
+            if (src / name).is_file():
+                shutil.copy2(src / name, dest / name)
+    return [out for _, out in pairs]
+
+
 def main(argv=None) -> int:
-    """``python -m tether_gym_agents.agent_files convert RUN_DIR [--out DIR] --allow-pickle``."""
+    """``python -m tether_gym_agents.agent_files {convert,export} ...`` (see ``--help``)."""
     import argparse
     import sys
 
@@ -489,8 +525,16 @@ def main(argv=None) -> int:
                            "RUN/final_agent)")
     conv.add_argument("--allow-pickle", action="store_true",
                       help="required: the conversion unpickles the run's files once")
+    exp = sub.add_parser("export", help="copy the safe files of a run, or of every seed_K "
+                                        "run of a folder, to share or ship them")
+    exp.add_argument("src", type=Path, help="run folder or folder of seed_K run folders")
+    exp.add_argument("dest", type=Path, help="destination folder")
     args = parser.parse_args(argv)
     try:
+        if args.cmd == "export":
+            written = export_runs(args.src, args.dest)
+            print(f"exported {len(written)} run(s) to {args.dest}")
+            return 0
         out = convert_run(args.run, args.out, allow_pickle=args.allow_pickle)
     except AgentLoadError as exc:
         print(f"agent_files: error: {exc}", file=sys.stderr)

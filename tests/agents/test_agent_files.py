@@ -193,3 +193,26 @@ def test_convert_pickled_run(tmp_path):
     obs = np.random.default_rng(2).normal(size=(32, 20)).astype(np.float32)
     assert np.array_equal(safe.predict(obs)[0], legacy.predict(obs)[0])
 
+
+
+def test_export_copies_only_the_safe_files(tmp_path):
+    """``export`` ships agents without pickles, checkpoints or logs."""
+    src = tmp_path / "runs"
+    for k in (0, 1):
+        run = src / f"seed_{k}"
+        _roundtrip(run.parent, "ppo", None)
+        (src / "ppo").rename(run)
+        for junk in ("best_model.zip", "train.log", "checkpoints/model_100_steps.zip"):
+            (run / junk).parent.mkdir(parents=True, exist_ok=True)
+            (run / junk).write_text("x")
+        (run / "command.txt").write_text("python train.py")
+    (src / "learning_curves.png").write_bytes(b"png")
+    assert agent_files_main(["export", str(src), str(tmp_path / "ship")]) == 0
+    shipped = sorted(str(p.relative_to(tmp_path / "ship")) for p in
+                     (tmp_path / "ship").rglob("*") if p.is_file())
+    assert shipped == ["learning_curves.png"] + [
+        f"seed_{k}/{name}" for k in (0, 1)
+        for name in sorted((AGENT_FILE, WEIGHTS_FILE, "command.txt"))]
+    assert TrainedAgent.load(tmp_path / "ship" / "seed_1").algo == "ppo"
+    (src / "seed_1" / AGENT_FILE).unlink()
+    assert agent_files_main(["export", str(src), str(tmp_path / "again")]) == 2
