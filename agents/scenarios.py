@@ -89,7 +89,25 @@ DEFAULT_SUITE = (
              {**RANDOM_INIT, "disturbance": 0.1, "obs_noise": 1e-3}),
 )
 
-SUITES = {"default": DEFAULT_SUITE, "paper": DEFAULT_SUITE[:1]}
+BEYOND_SUITE = (
+    Scenario("amp_0.1", "random init, reference amplitude A = 0.1",
+             {**RANDOM_INIT, "amplitude": 0.1}),
+    Scenario("amp_0.3", "random init, reference amplitude A = 0.3",
+             {**RANDOM_INIT, "amplitude": 0.3}),
+    Scenario("ecc_0.05", "random init, e = 0.05", {**RANDOM_INIT, "eccentricity": 0.05}),
+    Scenario("ecc_0.4", "random init, e = 0.4 (beyond the training range)",
+             {**RANDOM_INIT, "eccentricity": 0.4}),
+    Scenario("init_0.25", "theta_i(0) in +-0.25 rad", {**RANDOM_INIT, "init_theta_range": 0.25}),
+    Scenario("accel_0.005", "random init, reel acceleration limit 0.005 m/s^2",
+             {**RANDOM_INIT, "accel_limit": 0.005}),
+    Scenario("orbits_4", "random init, 4-orbit episodes", {**RANDOM_INIT, "orbits_per_episode": 4}),
+    Scenario("gravity_full", "random init, exact inverse-square gravity",
+             {**RANDOM_INIT, "gravity": "full"}),
+)
+"""Variations the shipped agents were not trained on, within the env's documented ranges
+(the generalisation check of docs/task_design.md; not used to choose any design)."""
+
+SUITES = {"default": DEFAULT_SUITE, "paper": DEFAULT_SUITE[:1], "beyond": BEYOND_SUITE}
 
 
 SCENARIO_KEYS = ("name", "description", "env_kwargs", "nominal")
