@@ -9,7 +9,7 @@
                         ci95: {metric: [lo, hi] or null},
                         probability_of_improvement: {metric: p or null},
                         failures: {slack, tumble, length}}}
-    per_scenario {scenario: {policy: {<metric>: IQM over runs}}}
+    per_scenario {scenario: {policy: {<metric>: IQM over runs, ci95: {<metric>: [lo, hi]}}}}
     episodes    [{policy, run, scenario, seed, <every metric>}, ...]
 
 so that anyone can recompute the statistics from ``episodes``.
@@ -148,7 +148,9 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
                                                   scenario_names))
         policies[spec.name] = block
     per_scenario = {
-        sc: {spec.name: {m: iqm(scores[spec.name][m][:, j]) for m in METRICS}
+        sc: {spec.name: {**{m: iqm(scores[spec.name][m][:, j]) for m in METRICS},
+                         "ci95": {m: stratified_bootstrap_ci(scores[spec.name][m][:, j:j + 1])
+                                  for m in METRICS}}
              for spec in specs}
         for j, sc in enumerate(scenario_names)}
     return {
@@ -229,16 +231,23 @@ def markdown_tables(results: dict) -> str:
             poi = block["probability_of_improvement"]
             lines.append(f"| {name} | " + " | ".join(
                 "n/a" if poi[m] is None else f"{poi[m]:.2f}" for m, _ in TABLE_COLUMNS) + " |")
-    lines += ["", "Per scenario (IQM over runs): success rate / tracking RMS after orbit 1 "
-                  "[rad]", "",
+    lines += ["", "Per scenario (IQM over runs [95 % bootstrap CI over runs, 2+ runs]): "
+                  "success rate / tracking RMS after orbit 1 [rad]", "",
               "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     for sc, per in results["per_scenario"].items():
         cells = []
         for p in names:
-            rms = per[p]["tracking_rms"]
-            success = per[p]["success"]
-            cells.append(("n/a" if success is None or not math.isfinite(success)
-                          else f"{success:.2f}") + " / "
-                         + (f"{rms:.2e}" if rms is not None and math.isfinite(rms) else "n/a"))
+            cells.append(_scenario_cell(per[p], "success", "{:.2f}") + " / "
+                         + _scenario_cell(per[p], "tracking_rms", "{:.2e}"))
         lines.append(f"| {sc} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
+
+
+def _scenario_cell(block: dict, metric: str, fmt: str) -> str:
+    """``value [lo, hi]`` of one policy on one scenario (interval only with 2+ runs)."""
+    value = block[metric]
+    if value is None or not math.isfinite(value):
+        return "n/a"
+    ci = block.get("ci95", {}).get(metric)
+    return fmt.format(value) + ("" if ci is None else
+                                " [" + fmt.format(ci[0]) + ", " + fmt.format(ci[1]) + "]")

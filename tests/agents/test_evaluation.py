@@ -81,8 +81,8 @@ def test_seed_folder_is_one_policy_with_several_runs(tmp_path):
     if "ppo" not in shipped:
         pytest.skip("no shipped PPO agent")
     folder = tmp_path / "ppo_runs"
-    for k in (0, 1):
-        shutil.copytree(shipped["ppo"], folder / f"seed_{k}")
+    for k in (0, 1):  # the first shipped run, twice
+        shutil.copytree(evaluation.resolve_policy("ppo").runs[0], folder / f"seed_{k}")
     res = evaluation.evaluate(["smc", str(folder)], "paper", 2, out=tmp_path / "o", plots=False,
                               log=None, env_kwargs=SHORT_KWARGS)
     block = res["policies"][str(folder)]
@@ -95,6 +95,10 @@ def test_seed_folder_is_one_policy_with_several_runs(tmp_path):
             assert _same(metrics, runs[(sc, seed, 1)])
     lo, hi = block["ci95"]["min_tension"]
     assert lo == hi == pytest.approx(block["min_tension"])
+    per = res["per_scenario"]["paper"][str(folder)]
+    assert per["ci95"]["min_tension"] == [per["min_tension"]] * 2 or \
+        tuple(per["ci95"]["min_tension"]) == (per["min_tension"],) * 2
+    assert res["per_scenario"]["paper"]["smc"]["ci95"]["min_tension"] is None  # one run
     files = res["meta"]["agents"][str(folder)][1]["files"]
     for name, digest in files.items():
         data = (folder / "seed_1" / name).read_bytes()
