@@ -16,13 +16,15 @@ Supported: PPO/A2C ``ActorCriticPolicy`` without gSDE and SAC/TD3-style actors w
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 __all__ = ["NumpyMLP"]
 
-_ACTIVATIONS = {"Tanh": np.tanh, "ReLU": lambda x: np.maximum(x, 0.0)}
+_ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
+    "Tanh": np.tanh, "ReLU": lambda x: np.maximum(x, 0.0)}
 
 
 @dataclass(frozen=True)
