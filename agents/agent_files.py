@@ -8,8 +8,10 @@ An agent is one folder (a *unit*) with two files:
     activation, ``log_std_init``, ...), the observation and action spaces (shape,
     dtype, bounds), the observation normalisation statistics (``mean``, ``var``,
     ``clip_obs``, ``epsilon``; ``null`` when observations are not normalised), the env
-    id and env kwargs the agent was trained on, the training seed and steps, and the
-    name and SHA-256 of the weights file.
+    id and env kwargs the agent was trained on, the training seed and steps, the
+    name and SHA-256 of the weights file, and ``hybrid``: ``null`` for a plain agent,
+    ``{"base": "smc", "scale": ..., "filter": ...}`` for the residual of a hybrid
+    (:mod:`tether_gym_agents.residual_spec`; absent in older files, read as ``null``).
 ``policy.safetensors``
     The policy's ``state_dict`` in the safetensors format: a JSON header (names,
     dtypes, shapes, offsets) followed by raw tensor bytes. Reading it builds tensors
@@ -39,10 +41,11 @@ from typing import Any
 import numpy as np
 
 from .jsonio import sha256_file, to_jsonable
+from .residual_spec import ResidualSpec
 
 __all__ = ["AgentLoadError", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT", "FORMAT_VERSION",
            "save_agent", "load_agent", "load_pickled_run", "convert_run", "is_unit",
-           "PICKLED_MODEL_FILES"]
+           "PICKLED_MODEL_FILES", "run_hybrid"]
 
 AGENT_FILE = "agent.json"
 WEIGHTS_FILE = "policy.safetensors"
@@ -167,7 +170,8 @@ def _safetensors():
 # ---------------------------------------------------------------------- save
 def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
                epsilon: float = 1e-8, env_id: str | None = None,
-               env_kwargs: dict | None = None, training: dict | None = None) -> Path:
+               env_kwargs: dict | None = None, training: dict | None = None,
+               hybrid: dict | None = None) -> Path:
     """Write a policy and its observation normalisation as a safe agent folder.
 
     Parameters
@@ -187,6 +191,9 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
         The environment the agent was trained on.
     training : dict or None
         Plain-data facts about the training (seed, steps, ...).
+    hybrid : dict or None
+        The residual hybrid the policy is the residual of (``ResidualSpec.to_dict()``:
+        base, scale, filter); None for a policy that acts alone.
 
     Returns
     -------
@@ -194,6 +201,8 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
         The agent folder.
     """
     algo = algo.lower()
+    if hybrid is not None:
+        hybrid = ResidualSpec.from_dict(hybrid, "hybrid").to_dict()
     if algo not in _WEIGHTS_MODULE:
         raise ValueError(f"algo={algo!r} must be one of {sorted(_WEIGHTS_MODULE)}")
     cls_name = type(policy).__name__
@@ -224,6 +233,7 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
                     "sha256": sha256_file(weights)},
         "env": {"id": env_id, "kwargs": to_jsonable(env_kwargs or {})},
         "training": to_jsonable(training or {}),
+        "hybrid": hybrid,
         "versions": _versions(),
     }
     text = json.dumps(meta, indent=1, allow_nan=False)
@@ -330,6 +340,14 @@ def load_agent(path):
         raise AgentLoadError(f"weights {weights} do not fit the policy in {meta_path}: "
                              f"{exc}") from None
     policy.set_training_mode(False)
+    if meta.get("hybrid") is not None:
+        try:
+            spec = ResidualSpec.from_dict(meta["hybrid"], f"{meta_path}: hybrid")
+            meta["hybrid"] = spec.to_dict()
+        except ValueError as exc:
+            raise AgentLoadError(str(exc)) from None
+    else:
+        meta["hybrid"] = None
     norm = meta["obs_normalization"]
     if norm is not None:
         need = ("mean", "var", "clip_obs", "epsilon")
@@ -440,6 +458,23 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None):
                                                "model_path": model_path, "config": cfg}
 
 
+def run_hybrid(config: dict) -> dict | None:
+    """The hybrid of a run from its ``config.yml`` (its ``residual`` hyperparameter).
+
+    Raises
+    ------
+    AgentLoadError
+        If the recorded ``residual`` is not a valid ResidualSpec.
+    """
+    value = (config.get("hyperparams") or {}).get("residual")
+    if value is None:
+        return None
+    try:
+        return ResidualSpec.from_dict(value, "config.yml: hyperparams.residual").to_dict()
+    except ValueError as exc:
+        raise AgentLoadError(str(exc)) from None
+
+
 def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
     """Convert a stable-baselines3 run folder (pickles) to a safe agent folder.
 
@@ -470,7 +505,7 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
                 "command": train_info.get("command")}
     return save_agent(out, model.policy, info["algo"], obs_rms, clip_obs, epsilon,
                       env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
-                      training=training)
+                      training=training, hybrid=run_hybrid(cfg))
 
 
 EXPORTED_FILES = (AGENT_FILE, WEIGHTS_FILE, "config.yml", "args.yml", "command.txt",

@@ -18,7 +18,12 @@ the same law behind the model-based safety filter of :mod:`tether_gym.safety`;
 ``zero``, ``periodic``, ``random``; all run with ``action_mode="rate"``), a shipped
 agent (``ppo``, ``sac``, ...), a run folder or model file written by ``train.py``, or a
 folder of seed run folders (``runs/ppo/seed_0/``, ``seed_1/``, ...), which is one
-policy with one run per folder.
+policy with one run per folder. An agent whose files record a ``hybrid`` (trained
+with a ``residual`` config, :mod:`tether_gym_agents.residual_env`) is of kind
+``hybrid``: it runs as the residual of
+:class:`~tether_gym_agents.hybrid.ResidualPolicy` around the sliding-mode law (and
+the filter, when it was trained with one), both on the scenario's nominal model like
+``smc`` and ``smc_filtered``.
 """
 
 from __future__ import annotations
@@ -60,7 +65,7 @@ class PolicyKind(Enum):
 
     BASELINE = "baseline"
     RL = "rl"
-    HYBRID = "hybrid"  # reserved: a learning policy on top of a model-based law
+    HYBRID = "hybrid"  # a learned residual on top of a model-based law
 
 
 @dataclass
@@ -81,14 +86,20 @@ class PolicySpec:
     def env_kwargs(self) -> dict:
         """Env arguments the policy needs on every scenario (its action mode).
 
-        The baselines command reel rates (``action_mode="rate"``); a trained agent
-        runs in the action mode it was trained in (:data:`ACTION_KEYS` of its recorded
-        env arguments, the env's defaults when absent). Nothing else of the training
-        env is used: the scenario sets the rest.
+        The baselines and the hybrids command reel rates (``action_mode="rate"``); a
+        trained agent runs in the action mode it was trained in (:data:`ACTION_KEYS` of
+        its recorded env arguments, the env's defaults when absent). Nothing else of the
+        training env is used: the scenario sets the rest.
         """
         if self.kind is PolicyKind.BASELINE:
             return {"action_mode": "rate"}
         self.load()
+        if self.kind is PolicyKind.HYBRID:
+            modes = {agent.env_kwargs.get("action_mode", "rate") for agent in self.agents}
+            if modes != {"rate"}:
+                raise ValueError(f"policy {self.name!r}: a hybrid's residual must be trained "
+                                 f"with action_mode='rate', its runs have {sorted(modes)}")
+            return {"action_mode": "rate"}
         recorded = [{k: agent.env_kwargs[k] for k in ACTION_KEYS if k in agent.env_kwargs}
                     for agent in self.agents]
         if any(r != recorded[0] for r in recorded):
@@ -109,32 +120,32 @@ class PolicySpec:
             return
         self.agents = [TrainedAgent.load(path, allow_pickle=self.allow_pickle)
                        for path in self.runs]
+        for agent in self.agents:
+            if (agent.hybrid is not None) != (self.kind is PolicyKind.HYBRID):
+                raise ValueError(f"policy {self.name!r} of kind {self.kind.value!r}: run "
+                                 f"{agent.path} records hybrid={agent.hybrid!r}")
 
     def policies(self, run: int, env, scenario: Scenario, seeds: list[int]) -> list:
         """One ``predict`` object per seed for ``run`` on the env of ``scenario``.
 
         Deterministic policies are shared; ``random`` gets a generator per episode,
         seeded with the episode's seed, so that its actions do not depend on the other
-        episodes.
+        episodes; the filtered ones and the hybrids get one object per episode (they
+        count their filter's interventions).
         """
         from .obs import ReelRatePolicy
         from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
         from .smc import SlidingModeController
 
+        if self.kind is PolicyKind.HYBRID:
+            return [_residual(self.agents[run], env, scenario) for _ in seeds]
         if self.kind is not PolicyKind.BASELINE:
             return [self.agents[run]] * len(seeds)
         if self.name == "random":
             return [RandomPolicy(env, seed=s) for s in seeds]
         if self.name in ("smc", "smc_filtered"):
-            nominal = None
-            if scenario.nominal is not None:
-                from tether_gym.physics import TetherChain
-
-                cfg = env.unwrapped.config
-                nominal = TetherChain(scenario.nominal["masses"],
-                                      scenario.nominal["eccentricity"], cfg.gravity,
-                                      cfg.total_tether_length / cfg.semi_latus_rectum)
-            policy: ReelRatePolicy = SlidingModeController.for_env(env, nominal=nominal)
+            policy: ReelRatePolicy = SlidingModeController.for_env(
+                env, nominal=_nominal_model(env, scenario))
             if self.name == "smc_filtered":
                 return [_filtered(policy, env, scenario) for _ in seeds]
         elif self.name == "zero":
@@ -142,6 +153,36 @@ class PolicySpec:
         else:
             policy = PeriodicReel.for_env(env)
         return [policy] * len(seeds)
+
+
+def _nominal_model(env, scenario: Scenario):
+    """The TetherChain of ``scenario.nominal`` (None: the env's configured model)."""
+    if scenario.nominal is None:
+        return None
+    from tether_gym.physics import TetherChain
+
+    cfg = env.unwrapped.config
+    return TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
+                       cfg.gravity, cfg.total_tether_length / cfg.semi_latus_rectum)
+
+
+def _residual(agent, env, scenario: Scenario):
+    """The hybrid of a residual ``agent``: SMC + scale * agent, filtered if trained so.
+
+    The sliding-mode law and the filter use the scenario's nominal model, as ``smc`` and
+    ``smc_filtered`` do. One per episode: a filter counts its interventions.
+    """
+    from tether_gym.safety import SafetyFilter
+
+    from .hybrid import ResidualPolicy
+    from .smc import SlidingModeController
+
+    spec = agent.hybrid
+    if spec is None:
+        raise ValueError(f"{agent!r} records no hybrid: it is not the residual of one")
+    base = SlidingModeController.for_env(env, nominal=_nominal_model(env, scenario))
+    flt = SafetyFilter.for_env(env, **(scenario.nominal or {})) if spec["filter"] else None
+    return ResidualPolicy(base, agent, spec["scale"], flt)
 
 
 def _filtered(policy, env, scenario: Scenario):
@@ -189,7 +230,15 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
         raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
                          "agent (run folder, model file or folder of seed_K run folders)")
     runs = _seed_runs(path) or [path]
-    return PolicySpec(name, PolicyKind.RL, runs, allow_pickle=allow_pickle)
+    from .trained import hybrid_of
+
+    hybrid = [hybrid_of(run) is not None for run in runs]
+    if any(hybrid) and not all(hybrid):
+        mixed = {str(r): "hybrid" if h else "rl" for r, h in zip(runs, hybrid, strict=True)}
+        raise ValueError(f"policy {name!r} mixes residuals of a hybrid and plain agents "
+                         f"{mixed}; evaluate them as separate policies")
+    kind = PolicyKind.HYBRID if all(hybrid) else PolicyKind.RL
+    return PolicySpec(name, kind, runs, allow_pickle=allow_pickle)
 
 
 def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):

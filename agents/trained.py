@@ -13,6 +13,7 @@ the same evaluation path as the baselines.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +26,12 @@ from .agent_files import (
     is_unit,
     load_agent,
     load_pickled_run,
+    run_hybrid,
 )
 from .mlp import NumpyMLP
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
-           "RUN_AGENT_DIRS", "find_unit"]
+           "RUN_AGENT_DIRS", "find_unit", "hybrid_of"]
 
 PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
 """Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
@@ -53,6 +55,33 @@ def find_unit(path) -> Path | None:
     return None
 
 
+def hybrid_of(path) -> dict | None:
+    """The recorded ``hybrid`` entry of the agent at ``path``, read without loading it.
+
+    Reads ``agent.json`` (or, for a run folder of pickled files only, its
+    ``config.yml``) as plain data; None when there is no entry or nothing readable
+    (:meth:`TrainedAgent.load` then reports what is wrong).
+    """
+    path = Path(path)
+    unit = find_unit(path)
+    try:
+        if unit is not None:
+            meta = json.loads((unit / AGENT_FILE).read_text())
+            return meta.get("hybrid") if isinstance(meta, dict) else None
+        cfg = (path if path.is_dir() else path.parent) / "config.yml"
+        if cfg.is_file():
+            import yaml
+
+            try:
+                data = yaml.safe_load(cfg.read_text()) or {}
+            except yaml.YAMLError:
+                return None
+            return run_hybrid(data) if isinstance(data, dict) else None
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+        return None
+    return None
+
+
 class TrainedAgent:
     """A stable-baselines3 policy plus its observation normalisation.
 
@@ -69,11 +98,16 @@ class TrainedAgent:
         The environment the agent was trained on (as recorded).
     path : Path or None
         The folder it was loaded from.
+    hybrid : dict or None
+        ``{"base", "scale", "filter"}`` when the policy is the residual of a hybrid
+        (it then acts only through :class:`~tether_gym_agents.hybrid.ResidualPolicy`),
+        None for a policy that acts alone.
     """
 
     def __init__(self, model, obs_rms=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
                  name: str = "agent", algo: str | None = None, env_id: str | None = None,
-                 env_kwargs: dict | None = None, path: Path | None = None):
+                 env_kwargs: dict | None = None, path: Path | None = None,
+                 hybrid: dict | None = None):
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
@@ -83,6 +117,7 @@ class TrainedAgent:
         self.env_id = env_id
         self.env_kwargs = dict(env_kwargs or {})
         self.path = path
+        self.hybrid = dict(hybrid) if hybrid is not None else None
         model.set_training_mode(False)  # once here, not on every predict
         self.mlp = NumpyMLP.from_policy(model)
         """The batch-invariant float64 forward pass of the deterministic action
@@ -141,7 +176,7 @@ class TrainedAgent:
                        float(norm["epsilon"]) if norm else 1e-8,
                        name=f"{meta['algo']}:{label}", algo=meta["algo"],
                        env_id=meta["env"].get("id"), env_kwargs=meta["env"].get("kwargs"),
-                       path=unit)
+                       path=unit, hybrid=meta["hybrid"])
         if path.is_file() and path.suffix not in (".zip", ".pkl"):
             raise AgentLoadError(f"{path} is not an agent file: give an agent folder "
                                  f"({AGENT_FILE} + {WEIGHTS_FILE}) or a run folder")
@@ -154,7 +189,7 @@ class TrainedAgent:
         return cls(model.policy, obs_rms, clip_obs, epsilon,
                    name=f"{info['algo']}:{info['run_dir'].name}", algo=info["algo"],
                    env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
-                   path=info["run_dir"])
+                   path=info["run_dir"], hybrid=run_hybrid(cfg))
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """Observations as the policy saw them in training (VecNormalize's formula)."""

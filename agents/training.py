@@ -37,13 +37,15 @@ import tether_gym
 from .agent_files import save_agent
 from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from .jsonio import to_jsonable
+from .residual_spec import ResidualSpec
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
-           "plot_learning_curve", "plot_seed_learning_curves", "ConfigError", "CONFIG_DIR"]
+           "residual_spec", "plot_learning_curve", "plot_seed_learning_curves", "ConfigError",
+           "CONFIG_DIR"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
-            "checkpoint_freq")
+            "checkpoint_freq", "residual")
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
 SEED_MAX = 2**31 - 1
 PROGRESS_EVERY_S = 30.0
@@ -118,7 +120,45 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
                 raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
     if not isinstance(params.get("env_kwargs") or {}, dict):
         raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
+    if "residual" in params:
+        residual_spec(params["residual"], str(path))
     return params
+
+
+def residual_spec(value, source: str) -> ResidualSpec | None:
+    """The validated ``residual`` key of a config (None: no hybrid).
+
+    ``residual: {base: smc, scale: 0.2, filter: true}`` trains the residual of the
+    hybrid u = filter(clip(u_smc + scale * a, -1, 1)) (:mod:`tether_gym_agents.residual_env`).
+
+    Raises
+    ------
+    ConfigError
+        On an unknown key or value (the message names the valid ones).
+    """
+    if value is None:
+        return None
+    try:
+        return ResidualSpec.from_dict(value, f"{source}: residual")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def _rate_mode_for(spec: ResidualSpec | None, env_kwargs: dict, source: str,
+                   notes: list[str]) -> dict:
+    """``env_kwargs`` with ``action_mode="rate"`` when a residual hybrid is trained."""
+    if spec is None:
+        return env_kwargs
+    mode = env_kwargs.get("action_mode")
+    if mode is None:
+        notes.append(f"{source}'s residual sets action_mode='rate' (the hybrid commands reel "
+                     "rates)")
+        return {**env_kwargs, "action_mode": "rate"}
+    if mode != "rate":
+        raise ConfigError(f"{source}: residual needs action_mode 'rate' (the hybrid commands "
+                          f"reel rates), but env kwargs give action_mode={mode!r}; remove it "
+                          "or set it to 'rate'")
+    return env_kwargs
 
 
 def parse_env_kwargs(items: list[str]) -> dict:
@@ -515,7 +555,8 @@ def _callbacks(eval_env, out: Path, args, eval_freq: int, ckpt_freq: int, n_envs
                    clip_obs=norm.clip_obs if norm is not None else 10.0,
                    epsilon=norm.epsilon if norm is not None else 1e-8,
                    env_id=agent_meta["env_id"], env_kwargs=agent_meta["env_kwargs"],
-                   training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)})
+                   training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)},
+                   hybrid=agent_meta["hybrid"])
 
     class RunEvalCallback(EvalCallback):
         """EvalCallback that also writes the best agent (safe format).
@@ -578,17 +619,27 @@ def _write_info(out: Path, info: dict) -> None:
     tmp.replace(out / "train_info.json")
 
 
-def _make_venv(env_id, n_envs, seed, env_kwargs):
-    from stable_baselines3.common.vec_env import VecMonitor
+def _make_venv(env_id, n_envs, seed, env_kwargs, residual: ResidualSpec | None = None):
+    """The (monitored) training or evaluation vec env; the hybrid's when ``residual``.
+
+    The residual wrapper sits below ``VecNormalize`` (added by the caller): its base
+    law and filter read raw observations.
+    """
+    from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
     from .vec_env import make_sb3_vec_env
 
+    venv: VecEnv
     if env_id == tether_gym.ENV_ID:
         venv = make_sb3_vec_env(n_envs, seed=seed, env_kwargs=env_kwargs)
     else:  # any other registered id: SB3's generic path
         from stable_baselines3.common.env_util import make_vec_env
 
         venv = make_vec_env(env_id, n_envs=n_envs, seed=seed, env_kwargs=env_kwargs)
+    if residual is not None:
+        from .residual_env import ResidualVecEnv
+
+        venv = ResidualVecEnv.from_spec(venv, residual)
     return VecMonitor(venv)
 
 
@@ -636,6 +687,11 @@ def _resolve(args) -> dict:
         raise ConfigError(f"{source}: policy_kwargs must be a mapping, not "
                           f"{params['policy_kwargs']!r} (no code is evaluated)")
     env_kwargs, notes = resolve_env_kwargs(run.get("env_kwargs") or {}, user_kwargs, source)
+    residual = residual_spec(run.get("residual"), source)
+    if residual is not None and args.env_id != tether_gym.ENV_ID:
+        raise ConfigError(f"{source}: residual needs --env-id {tether_gym.ENV_ID} (the base law "
+                          f"and filter are built for it), got {args.env_id!r}")
+    env_kwargs = _rate_mode_for(residual, env_kwargs, source, notes)
     _check_env(args.env_id, env_kwargs, args.env_kwargs, source)
     n_envs = args.n_envs if args.n_envs is not None else int(run.get("n_envs", 1))
     timesteps = args.timesteps if args.timesteps is not None else int(run.get("n_timesteps",
@@ -645,9 +701,11 @@ def _resolve(args) -> dict:
     ckpt_freq = (args.checkpoint_freq if args.checkpoint_freq is not None
                  else int(run.get("checkpoint_freq", 100_000)))
     _check_out(out)
+    if residual is not None:
+        run["residual"] = residual.to_dict()
     return {"out": out, "params": params, "run": run, "env_kwargs": env_kwargs, "notes": notes,
-            "n_envs": n_envs, "timesteps": timesteps, "eval_freq": eval_freq,
-            "ckpt_freq": ckpt_freq, "source": source}
+            "residual": residual, "n_envs": n_envs, "timesteps": timesteps,
+            "eval_freq": eval_freq, "ckpt_freq": ckpt_freq, "source": source}
 
 
 def _train(args, argv) -> int:
@@ -667,8 +725,12 @@ def _train(args, argv) -> int:
     gamma = params.get("gamma", 0.99)
     tb_log = str(out / "tb")
 
-    venv = _make_venv(args.env_id, n_envs, args.seed, env_kwargs)
-    eval_env = _make_venv(args.env_id, 1, args.seed + 10_000, env_kwargs)
+    residual = cfg["residual"]
+    venv = _make_venv(args.env_id, n_envs, args.seed, env_kwargs, residual)
+    eval_env = _make_venv(args.env_id, 1, args.seed + 10_000, env_kwargs, residual)
+    if residual is not None:
+        print(f"  residual hybrid: {json.dumps(residual.to_dict())}: the agent learns a in "
+              "u = filter(clip(u_smc + scale * a, -1, 1))")
     algo_cls = _algo_class(args.algo)
     info_path = out / "train_info.json"
     previous = json.loads(info_path.read_text()) if (args.resume and info_path.is_file()) else {}
@@ -705,7 +767,8 @@ def _train(args, argv) -> int:
                  "torch_threads": args.torch_threads, "command": command,
                  "tether_gym": tether_gym.__version__}
     agent_meta = {"algo": args.algo, "env_id": args.env_id, "env_kwargs": env_kwargs,
-                  "training": {"seed": args.seed, "command": command}}
+                  "training": {"seed": args.seed, "command": command},
+                  "hybrid": residual.to_dict() if residual is not None else None}
     evaluator, checkpoints, progress, save_safe = _callbacks(
         eval_env, out, args, cfg["eval_freq"], cfg["ckpt_freq"], n_envs, agent_meta, info_base,
         float(previous.get("wall_time_s", 0.0)), hasattr(model, "replay_buffer"))

@@ -1,0 +1,79 @@
+"""The plain-data description of a residual hybrid (no heavy imports).
+
+A :class:`ResidualSpec` is the ``residual`` key of a training config
+(``agents/configs/ppo_residual.yml``), the ``"hybrid"`` entry of an ``agent.json`` and
+:attr:`tether_gym_agents.trained.TrainedAgent.hybrid`; :mod:`tether_gym_agents.residual_env`
+trains the hybrid it describes and :mod:`tether_gym_agents.evaluation` evaluates it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from enum import Enum
+from typing import Any
+
+__all__ = ["BaseLaw", "ResidualSpec", "DEFAULT_SCALE"]
+
+DEFAULT_SCALE = 0.2
+"""Default weight of the residual [-] (see ``agents/configs/ppo_residual.yml``)."""
+
+
+class BaseLaw(Enum):
+    """The model-based law under the residual."""
+
+    SMC = "smc"
+
+
+@dataclass(frozen=True)
+class ResidualSpec:
+    """What a residual hybrid is made of (plain data).
+
+    Parameters
+    ----------
+    base : BaseLaw
+        The base law (``"smc"``: the paper's sliding-mode law, default gains).
+    scale : float
+        Weight of the residual [-], finite and >= 0 (0: the base law alone).
+    filter : bool
+        Whether the summed command goes through the safety filter.
+    """
+
+    base: BaseLaw = BaseLaw.SMC
+    scale: float = DEFAULT_SCALE
+    filter: bool = True
+
+    KEYS = ("base", "scale", "filter")
+
+    @classmethod
+    def from_dict(cls, data: Any, what: str = "residual") -> ResidualSpec:
+        """Validate a mapping ``{base, scale, filter}`` (all optional; defaults above).
+
+        Raises
+        ------
+        ValueError
+            For a non-mapping, an unknown key or a bad value; the message names ``what``,
+            the key and the valid keys or values.
+        """
+        if not isinstance(data, dict):
+            raise ValueError(f"{what} must be a mapping with keys {list(cls.KEYS)}, got "
+                             f"{data!r}")
+        unknown = sorted(str(k) for k in set(data) - set(cls.KEYS))
+        if unknown:
+            raise ValueError(f"{what}: unknown key(s) {unknown}; valid keys: {list(cls.KEYS)}")
+        valid_bases = [b.value for b in BaseLaw]
+        base = data.get("base", cls.base.value)
+        if base not in valid_bases:
+            raise ValueError(f"{what}: base {base!r} is not one of {valid_bases}")
+        scale = data.get("scale", cls.scale)
+        if isinstance(scale, bool) or not isinstance(scale, (int, float)) \
+                or not math.isfinite(scale) or scale < 0:
+            raise ValueError(f"{what}: scale {scale!r} must be a finite number >= 0")
+        use_filter = data.get("filter", cls.filter)
+        if not isinstance(use_filter, bool):
+            raise ValueError(f"{what}: filter {use_filter!r} must be true or false")
+        return cls(BaseLaw(base), float(scale), use_filter)
+
+    def to_dict(self) -> dict:
+        """The JSON/YAML form: ``{"base": "smc", "scale": 0.2, "filter": true}``."""
+        return {"base": self.base.value, "scale": self.scale, "filter": self.filter}
