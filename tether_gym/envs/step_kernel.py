@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from ..physics import kernels
-from ..physics.jit import INLINE, KERNEL, LOOP
+from ..physics.jit import INLINE, LOOP
 from ..physics.layout import at
 from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
@@ -88,9 +88,8 @@ class RowWork(NamedTuple):
     terms: np.ndarray     # (len(TERMS),) per-term sums
 
 
-@njit(**KERNEL)
-def make_row_work(n, n_terms):
-    """Fresh :class:`RowWork` for n tethers."""
+def make_row_work(n: int, n_terms: int) -> RowWork:
+    """Fresh :class:`RowWork` for n tethers (plain Python: nothing to compile)."""
     return RowWork(kernels.make_scratch(n), np.empty(n), np.zeros(n), np.empty(n),
                    np.empty(4 * n), np.empty(n_terms))
 

@@ -41,9 +41,8 @@ def make_rk4(fun, compiled=True):
         ``node=True`` at every grid node, the start of each step and the end
         (n_steps + 1 calls, the derivative there serving as the next step's first
         stage), and with ``node=False`` at the three inner stages. All evaluations go
-        through one call site, so a compiled ``fun`` is inlined once (the compile
-        time of the kernels is mostly the inlined right-hand sides). The compiled
-        integrator is itself inlined into its compiled callers.
+        through one call site, so a compiled ``fun`` is compiled into it once. The
+        compiled integrator is inlined into its compiled callers.
     """
 
     def integrate(t0, y, h, n_steps, args, work, deriv):  # pragma: no cover - compiled
