@@ -13,8 +13,8 @@ from tether_gym_agents.agent_files import AGENT_FILE, load_agent
 from tether_gym_agents.evaluation import make_policy, resolve_policy
 from tether_gym_agents.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
 
-SHIPPED = ("ppo",)
-"""Policies the package ships (each a folder of seed_K runs)."""
+SHIPPED = {"ppo": "rl", "smc_residual": "hybrid"}
+"""Policies the package ships (each a folder of seed_K runs) and their kind."""
 RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
              "eval/evaluations.npz")
 
@@ -28,26 +28,27 @@ def test_the_shipped_policies_are_there_without_pickles():
 @pytest.mark.parametrize("name", SHIPPED)
 def test_every_run_is_complete_and_acts_on_the_current_env(name):
     spec = resolve_policy(name)
+    assert spec.kind.value == SHIPPED[name]
     assert spec.n_runs >= 5 and all(p.name.startswith("seed_") for p in spec.runs)
     for run in spec.runs:
         for file in RUN_FILES:
             assert (run / file).is_file(), (run, file)
         _, meta = load_agent(run)
-        assert meta["algo"] == name and meta["env"]["id"] == tether_gym.ENV_ID
+        assert meta["algo"] == "ppo" and meta["env"]["id"] == tether_gym.ENV_ID
+        assert (meta.get("hybrid") is not None) == (SHIPPED[name] == "hybrid")
         info = json.loads((run / "train_info.json").read_text())
         assert info["num_timesteps"] > 0
-    agent = TrainedAgent.load(spec.runs[0])
     env = gym.make(tether_gym.ENV_ID, **spec.env_kwargs)
+    policy = make_policy(name, env)  # what evaluate.py runs: the agent, or the hybrid
     obs, _ = env.reset(seed=0)
     for _ in range(200):
-        action, _ = agent.predict(obs)
-        assert action.shape == env.action_space.shape and np.all(np.abs(action) <= 1.0)
+        action, _ = policy.predict(obs)
+        assert np.shape(action) == env.action_space.shape and np.all(np.abs(action) <= 1.0)
         obs, reward, terminated, truncated, info = env.step(action)
         assert np.isfinite(reward) and not terminated, info["failure"]
-    assert make_policy(name, env).name == agent.name  # evaluate.py finds it by name
 
 
 def test_agent_rejects_foreign_observation():
-    agent = TrainedAgent.load(resolve_policy(SHIPPED[0]).runs[0])
+    agent = TrainedAgent.load(resolve_policy("ppo").runs[0])
     with pytest.raises(ValueError, match="does not fit this agent"):
         agent.predict(np.zeros(5, dtype=np.float32))
