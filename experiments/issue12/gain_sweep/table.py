@@ -1,13 +1,26 @@
-import json, sys
-rows = []
-for g in ("0.1", "0.25", "0.5"):
-    r = json.load(open(f"/work/runs/gain/eval_g{g}/results.json"))
-    (name, b), = [(k, v) for k, v in r["policies"].items()]
-    def cell(m, f):
-        v = b[m]; ci = b["ci95"][m]
-        return (f.format(v) if v is not None else "n/a") + ("" if ci is None else f" [{f.format(ci[0])}, {f.format(ci[1])}]")
-    fails = sum(b["failures"].values())
-    rows.append(f"| {g} | {b['n_runs']} | {cell('success', '{:.3f}')} | {cell('tracking_rms', '{:.2e}')} | {cell('reel_excursion', '{:.3f}')} | {cell('reel_effort', '{:.3f}')} | {fails}/{b['n_episodes']} |")
-print("| increment gain | seeds | success | tracking RMS [rad] | reel excursion | reel effort | failed episodes |")
+"""Markdown table of the increment-gain sweep from the evaluate.py results of each gain."""
+
+import json
+import sys
+from pathlib import Path
+
+HERE = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/work/runs/gain")
+
+
+def cell(block: dict, metric: str, fmt: str) -> str:
+    """``value [lo, hi]`` of one metric of a policy block."""
+    value, ci = block[metric], block["ci95"][metric]
+    text = fmt.format(value) if value is not None else "n/a"
+    return text + ("" if ci is None else f" [{fmt.format(ci[0])}, {fmt.format(ci[1])}]")
+
+
+print("| increment gain | seeds | success | tracking RMS [rad] | reel excursion | reel effort "
+      "| failed episodes |")
 print("|---|---|---|---|---|---|---|")
-print("\n".join(rows))
+for gain in ("0.1", "0.25", "0.5"):
+    results = json.loads((HERE / f"eval_g{gain}" / "results.json").read_text())
+    (block,) = results["policies"].values()
+    fails = sum(block["failures"].values())
+    print(f"| {gain} | {block['n_runs']} | {cell(block, 'success', '{:.3f}')} | "
+          f"{cell(block, 'tracking_rms', '{:.2e}')} | {cell(block, 'reel_excursion', '{:.3f}')} | "
+          f"{cell(block, 'reel_effort', '{:.3f}')} | {fails}/{block['n_episodes']} |")
