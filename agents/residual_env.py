@@ -28,6 +28,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepR
 
 from tether_gym.physics import STATE
 from tether_gym.safety import FilterResult, SafetyFilter
+from tether_gym.wrappers import state_of
 
 from .hybrid import state_from_observation
 from .obs import ObservationLayout
@@ -39,7 +40,7 @@ __all__ = ["BaseLaw", "ResidualSpec", "ResidualVecEnv", "DEFAULT_SCALE", "INFO_K
 INFO_KEYS = ("filter_active", "filter_correction", "filter_feasible")
 """Entries :class:`ResidualVecEnv` adds to every step's ``infos[i]`` (as
 :data:`tether_gym.wrappers.INFO_KEYS`; False, 0.0, True without a filter)."""
-_STATE_KEYS = ("nu", "theta", "dtheta", "length", "dlength")
+_STATE_KEYS = ("nu", *STATE.names)
 
 
 def _config_view(venv: VecEnv) -> SimpleNamespace:
@@ -170,12 +171,9 @@ class ResidualVecEnv(VecEnvWrapper):
         """(nu (B,), state rows (B, 4n)) of the sub-envs now: info where it has them."""
         assert self._obs is not None
         nu, y = state_from_observation(self.layout, np.asarray(self._obs))
-        sl = STATE.slices(self.layout.n_tethers)
         for i, info in enumerate(self._infos):
             if all(k in info for k in _STATE_KEYS):
-                nu[i] = float(info["nu"])
-                for key in _STATE_KEYS[1:]:
-                    y[i, sl[key]] = np.asarray(info[key], dtype=np.float64)
+                nu[i], y[i] = state_of(info)
         return nu, y
 
     def step_async(self, actions: np.ndarray) -> None:

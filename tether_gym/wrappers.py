@@ -7,6 +7,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from .physics import STATE
 from .safety import FilterResult, SafetyFilter
 
 __all__ = ["SafetyFilterWrapper", "INFO_KEYS", "state_of"]
@@ -21,8 +22,8 @@ def state_of(info: dict) -> tuple[float, np.ndarray]:
     The env's ``info`` holds the true (noise-free) state; the observation may carry
     ``obs_noise``.
     """
-    return float(info["nu"]), np.concatenate([np.asarray(info[key], dtype=float) for key in
-                                              ("theta", "dtheta", "length", "dlength")])
+    return float(info["nu"]), np.concatenate([np.asarray(info[key], dtype=float)
+                                              for key in STATE.names])
 
 
 class SafetyFilterWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
