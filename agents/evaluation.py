@@ -163,7 +163,7 @@ def _nominal_model(env, scenario: Scenario):
 
     cfg = env.unwrapped.config
     return TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
-                       cfg.gravity, cfg.total_tether_length / cfg.semi_latus_rectum)
+                       cfg.gravity, cfg.scales.length_ratio)
 
 
 def _residual(agent, env, scenario: Scenario):
