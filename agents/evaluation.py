@@ -92,14 +92,14 @@ class PolicySpec:
         training env is used: the scenario sets the rest.
         """
         if self.kind is PolicyKind.BASELINE:
-            return {"action_mode": "rate"}
+            return dict(_rate_mode())
         self.load()
         if self.kind is PolicyKind.HYBRID:
             modes = {agent.env_kwargs.get("action_mode", "rate") for agent in self.agents}
             if modes != {"rate"}:
                 raise ValueError(f"policy {self.name!r}: a hybrid's residual must be trained "
                                  f"with action_mode='rate', its runs have {sorted(modes)}")
-            return {"action_mode": "rate"}
+            return dict(_rate_mode())
         recorded = [{k: agent.env_kwargs[k] for k in ACTION_KEYS if k in agent.env_kwargs}
                     for agent in self.agents]
         if any(r != recorded[0] for r in recorded):
@@ -153,6 +153,13 @@ class PolicySpec:
         else:
             policy = PeriodicReel.for_env(env)
         return [policy] * len(seeds)
+
+
+def _rate_mode() -> dict:
+    """Env arguments of the policies that command reel rates (baselines, hybrids)."""
+    from .obs import ReelRatePolicy
+
+    return ReelRatePolicy.ENV_KWARGS
 
 
 def _nominal_model(env, scenario: Scenario):

@@ -196,7 +196,7 @@ class RandomPolicy:
         Seed of the policy's own generator (independent of the env's).
     """
 
-    ENV_KWARGS = {"action_mode": "rate"}
+    ENV_KWARGS = ReelRatePolicy.ENV_KWARGS
     """Env arguments of the benchmark's random baseline (uniform reel-rate commands)."""
 
     def __init__(self, env, seed: int | None = None):

@@ -11,6 +11,7 @@ import gymnasium as gym
 
 import tether_gym
 
+from ..obs import ReelRatePolicy
 from ..open_loop import PeriodicReel, ZeroStateReel
 from ..rollout import Trajectory, make_vector_env, rollout
 from ..smc import SlidingModeController
@@ -44,7 +45,7 @@ def run_episode(policy_for_env, orbits: float, options: dict | None = None, seed
         Further env arguments (the paper's laws command reel rates:
         ``action_mode="rate"`` unless given).
     """
-    kwargs = {"action_mode": "rate", **env_kwargs, "orbits_per_episode": orbits}
+    kwargs = {**ReelRatePolicy.ENV_KWARGS, **env_kwargs, "orbits_per_episode": orbits}
     venv = make_vector_env(1, kwargs)
     try:
         return rollout(policy_for_env(venv), [seed], options=options, env=venv)[0]
