@@ -23,7 +23,10 @@ with a ``residual`` config, :mod:`tether_gym_agents.residual_env`) is of kind
 ``hybrid``: it runs as the residual of
 :class:`~tether_gym_agents.hybrid.ResidualPolicy` around the sliding-mode law (and
 the filter, when it was trained with one), both on the scenario's nominal model like
-``smc`` and ``smc_filtered``.
+``smc`` and ``smc_filtered``. ``handover:AGENT`` (e.g. ``handover:ppo``) is the hybrid
+:class:`~tether_gym_agents.hybrid.HandoverPolicy` of a trained agent: the agent steers
+the transient and hands over to the sliding-mode law inside its boundary layer, all of
+it behind the safety filter, on the same nominal model.
 """
 
 from __future__ import annotations
@@ -48,8 +51,8 @@ from .metrics import episode_metrics
 from .rollout import Trajectory, rollout
 from .scenarios import Scenario, describe_suites, get_suite
 
-__all__ = ["main", "evaluate", "resolve_policy", "make_policy", "PolicyKind", "PolicySpec",
-           "BASELINES", "MAX_SEEDS"]
+__all__ = ["main", "evaluate", "resolve_policy", "make_policy", "default_policies",
+           "PolicyKind", "PolicySpec", "BASELINES", "HANDOVER", "MAX_SEEDS"]
 
 BASELINES = ("smc", "smc_filtered", "zero", "periodic", "random")
 ACTION_KEYS = ("action_mode", "increment_gain")
@@ -58,6 +61,10 @@ MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
 MAX_SEED = 2**31 - 1
 _SEED_DIR = re.compile(r"seed_(\d+)\Z")
+HANDOVER = "handover:"
+"""Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
+HANDOVER_OF = ("ppo",)
+"""Shipped agents whose handover hybrid ``python evaluate.py`` benchmarks by default."""
 
 
 class PolicyKind(Enum):
@@ -65,7 +72,7 @@ class PolicyKind(Enum):
 
     BASELINE = "baseline"
     RL = "rl"
-    HYBRID = "hybrid"  # a learned residual on top of a model-based law
+    HYBRID = "hybrid"  # learning combined with a model-based law (residual, handover)
 
 
 @dataclass
@@ -81,6 +88,9 @@ class PolicySpec:
     runs: list
     agents: list = field(default_factory=list)
     allow_pickle: bool = False
+    handover: bool = False
+    """A :class:`~tether_gym_agents.hybrid.HandoverPolicy` of the runs' agents (else a
+    hybrid is the residual its agents record)."""
 
     @property
     def env_kwargs(self) -> dict:
@@ -94,6 +104,8 @@ class PolicySpec:
         if self.kind is PolicyKind.BASELINE:
             return dict(_rate_mode())
         self.load()
+        if self.handover:
+            return dict(_rate_mode())
         if self.kind is PolicyKind.HYBRID:
             modes = {agent.env_kwargs.get("action_mode", "rate") for agent in self.agents}
             if modes != {"rate"}:
@@ -120,25 +132,28 @@ class PolicySpec:
             return
         self.agents = [TrainedAgent.load(path, allow_pickle=self.allow_pickle)
                        for path in self.runs]
+        residual = self.kind is PolicyKind.HYBRID and not self.handover
         for agent in self.agents:
-            if (agent.hybrid is not None) != (self.kind is PolicyKind.HYBRID):
+            if (agent.hybrid is not None) != residual:
                 raise ValueError(f"policy {self.name!r} of kind {self.kind.value!r}: run "
                                  f"{agent.path} records hybrid={agent.hybrid!r}")
 
     def policies(self, run: int, env, scenario: Scenario, seeds: list[int]) -> list:
         """One ``predict`` object per seed for ``run`` on the env of ``scenario``.
 
-        Deterministic policies are shared; ``random`` gets a generator per episode,
-        seeded with the episode's seed, so that its actions do not depend on the other
-        episodes; the filtered ones and the hybrids get one object per episode (they
-        count their filter's interventions).
+        Deterministic policies are shared (the rollout batches the batch-invariant ones;
+        a filter's counters then sum over the episodes, and the rollout records each
+        episode's interventions); ``random`` gets a generator per episode, seeded with
+        the episode's seed, so that its actions do not depend on the other episodes.
         """
         from .obs import ReelRatePolicy
         from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
         from .smc import SlidingModeController
 
+        if self.handover:
+            return [_handover(self.agents[run], env, scenario)] * len(seeds)
         if self.kind is PolicyKind.HYBRID:
-            return [_residual(self.agents[run], env, scenario) for _ in seeds]
+            return [_residual(self.agents[run], env, scenario)] * len(seeds)
         if self.kind is not PolicyKind.BASELINE:
             return [self.agents[run]] * len(seeds)
         if self.name == "random":
@@ -147,7 +162,7 @@ class PolicySpec:
             policy: ReelRatePolicy = SlidingModeController.for_env(
                 env, nominal=_nominal_model(env, scenario))
             if self.name == "smc_filtered":
-                return [_filtered(policy, env, scenario) for _ in seeds]
+                policy = _filtered(policy, env, scenario)
         elif self.name == "zero":
             policy = ZeroStateReel.for_env(env)
         else:
@@ -177,7 +192,7 @@ def _residual(agent, env, scenario: Scenario):
     """The hybrid of a residual ``agent``: SMC + scale * agent, filtered if trained so.
 
     The sliding-mode law and the filter use the scenario's nominal model, as ``smc`` and
-    ``smc_filtered`` do. One per episode: a filter counts its interventions.
+    ``smc_filtered`` do.
     """
     from tether_gym.safety import SafetyFilter
 
@@ -192,11 +207,19 @@ def _residual(agent, env, scenario: Scenario):
     return ResidualPolicy(base, agent, spec["scale"], flt)
 
 
-def _filtered(policy, env, scenario: Scenario):
-    """``policy`` behind the safety filter on the same nominal model.
+def _handover(agent, env, scenario: Scenario):
+    """``agent`` handing over to SMC, filtered, both on the scenario's nominal model."""
+    from tether_gym.safety import SafetyFilter
 
-    One per episode: the filter counts its interventions.
-    """
+    from .hybrid import HandoverPolicy
+    from .smc import SlidingModeController
+
+    base = SlidingModeController.for_env(env, nominal=_nominal_model(env, scenario))
+    return HandoverPolicy(agent, base, SafetyFilter.for_env(env, **(scenario.nominal or {})))
+
+
+def _filtered(policy, env, scenario: Scenario):
+    """``policy`` behind the safety filter on the same nominal model."""
     from .hybrid import FilteredPolicy
 
     nominal = scenario.nominal or {}
@@ -219,6 +242,17 @@ def shipped_agents() -> dict[str, Path]:
     return pretrained_agents()
 
 
+def default_policies() -> list[str]:
+    """What ``python evaluate.py`` benchmarks by default.
+
+    The baselines, the shipped agents and the handover hybrid of each shipped agent in
+    :data:`HANDOVER_OF`.
+    """
+    shipped = shipped_agents()
+    return (list(BASELINES) + list(shipped)
+            + [HANDOVER + name for name in HANDOVER_OF if name in shipped])
+
+
 def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     """PolicySpec of a baseline name, a shipped agent's name or a path.
 
@@ -228,6 +262,13 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     """
     if name in BASELINES:
         return PolicySpec(name, PolicyKind.BASELINE, [None])
+    if name.startswith(HANDOVER):
+        inner = resolve_policy(name[len(HANDOVER):], allow_pickle=allow_pickle)
+        if inner.kind is not PolicyKind.RL:
+            raise ValueError(f"policy {name!r}: a handover hybrid needs a trained agent that "
+                             f"acts alone, {inner.name!r} is of kind {inner.kind.value!r}")
+        return PolicySpec(name, PolicyKind.HYBRID, inner.runs, allow_pickle=allow_pickle,
+                          handover=True)
     shipped = shipped_agents()
     path = shipped.get(name)
     if path is None and Path(name).exists():
@@ -453,10 +494,11 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
 
 def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("policies", nargs="*",
-                        help="smc, zero, periodic, random, shipped agents (ppo, sac, ...) or "
-                             "paths to trained agents (run folder, model file, or a folder "
-                             "of seed_K run folders = one policy with several runs); default: "
-                             "all baselines and shipped agents")
+                        help="smc, smc_filtered, zero, periodic, random, shipped agents "
+                             "(ppo, ...), paths to trained agents (run folder, model file, or "
+                             "a folder of seed_K run folders = one policy with several runs), "
+                             "or handover:AGENT (the agent hands over to smc, filtered); "
+                             "default: all baselines, shipped agents and handover:ppo")
     parser.add_argument("--suite", default="default",
                         help="scenario suite: a name below or a YAML suite file (default: "
                              "default)")
@@ -538,7 +580,7 @@ def main(argv=None) -> int:
         _check_count("--seed", args.seed, 0, MAX_SEED - args.seeds + 1)
         _check_count("--torch-threads", args.torch_threads, 1, 256)
         get_suite(args.suite)
-        policies = args.policies or list(BASELINES) + list(shipped_agents())
+        policies = args.policies or default_policies()
         for name in policies:
             resolve_policy(name)
         check_out_dir(args.out)

@@ -1,9 +1,10 @@
-"""Hybrid policies: a safety filter around any rate-mode policy, and residual RL.
+"""Hybrid policies: a safety filter around any rate-mode policy, residual RL and handover.
 
-Both have stable-baselines3's ``predict(observation, state=None, episode_start=None,
+All have stable-baselines3's ``predict(observation, state=None, episode_start=None,
 deterministic=True) -> (actions, state)``, so they run through
 :func:`~tether_gym_agents.rollout.rollout`, :mod:`~tether_gym_agents.evaluation` and
-SB3's ``evaluate_policy`` like every other policy.
+SB3's ``evaluate_policy`` like every other policy. They are ``batch_invariant`` when
+their parts are (each row's action is bitwise what it would be alone).
 
 * :class:`FilteredPolicy` passes the wrapped policy's action (a normalised reel-rate
   command) through :meth:`tether_gym.safety.SafetyFilter.project` at the state read
@@ -11,6 +12,9 @@ SB3's ``evaluate_policy`` like every other policy.
 * :class:`ResidualPolicy` commands ``clip(a_base + scale * a_residual, -1, 1)``, with
   a_base the base law's action (e.g. the sliding-mode controller) and a_residual a
   trained model's deterministic action; given a filter, it filters the sum.
+* :class:`HandoverPolicy` lets a trained policy steer the transient and hands over to
+  the sliding-mode law once the law acts inside its boundary layer without saturating,
+  filtered.
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from tether_gym.safety import FilterResult, SafetyFilter
 
 from .obs import ObservationLayout
 
-__all__ = ["FilteredPolicy", "ResidualPolicy", "state_from_observation"]
+__all__ = ["FilteredPolicy", "ResidualPolicy", "HandoverPolicy", "state_from_observation"]
 
 
 def state_from_observation(layout: ObservationLayout, obs: np.ndarray):
@@ -54,10 +58,22 @@ class _Filtering:
         """Of those, how many the filter changed."""
         self.infeasible = 0
         """Of those, how many had no command meeting every constraint."""
-        self.last_filter_active: bool | None = None
-        """Whether the filter changed the last action (one observation per call), read by
-        :func:`tether_gym_agents.rollout.rollout` for the ``filter_rate`` metric."""
+        self.last_filter_active: np.ndarray | None = None
+        """(B,) bool: whether the filter changed each action of the last call (None
+        without a filter), read by :func:`tether_gym_agents.rollout.rollout` for the
+        ``filter_rate`` metric."""
         self.last_result: FilterResult | None = None
+
+    @property
+    def batch_invariant(self) -> bool:
+        """True when every part's rows are bitwise independent of the batch.
+
+        The filter's are: it decides each row on that row alone.
+        """
+        return all(getattr(part, "batch_invariant", False) for part in self._parts())
+
+    def _parts(self) -> tuple:  # pragma: no cover - abstract
+        raise NotImplementedError
 
     def reset_counts(self) -> None:
         """Set the counters to zero (e.g. between episodes)."""
@@ -77,7 +93,7 @@ class _Filtering:
         self.steps += int(res.active.shape[0])
         self.interventions += int(res.active.sum())
         self.infeasible += int((~res.feasible).sum())
-        self.last_filter_active = bool(res.active[-1])
+        self.last_filter_active = res.active.copy()
         return res.command.astype(np.float32)
 
 
@@ -124,6 +140,9 @@ class FilteredPolicy(_Filtering):
             raise ValueError(f"the filter is for {safety_filter.n} tethers, the policy's env "
                              f"has {self.layout.n_tethers}")
         self._init_counts()
+
+    def _parts(self) -> tuple:
+        return (self.policy,)
 
     @classmethod
     def for_env(cls, policy, env, **filter_kwargs) -> FilteredPolicy:
@@ -179,6 +198,9 @@ class ResidualPolicy(_Filtering):
         self.layout.require_rate_mode(type(self).__name__)
         self._init_counts()
 
+    def _parts(self) -> tuple:
+        return (self.base, self.residual_model)
+
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         """stable-baselines3 interface: (action, None); the residual is always deterministic."""
         batch, single = self.layout.as_batch(observation)
@@ -194,3 +216,125 @@ class ResidualPolicy(_Filtering):
     def __repr__(self) -> str:
         return (f"ResidualPolicy(base={self.base!r}, scale={self.scale}, "
                 f"filtered={self.safety_filter is not None})")
+
+
+class HandoverPolicy(_Filtering):
+    """A trained policy for the transient, then the sliding-mode law for good.
+
+    Each episode starts with the *learned* policy in control. It hands over to the
+    *base* law (the paper's sliding-mode controller) at the first step where the law
+    would act as a linear feedback with reserve: every tether's sliding variable s
+    (Eq. 12, :meth:`SlidingModeController.sliding_variable`) within ``enter`` of the
+    surface (inside the boundary layer eps, where sat(s / eps) is linear) and every
+    command of the law within ``command_bound`` of zero (not saturated: the paper's
+    failures come with saturated commands in the first-orbit transient,
+    docs/task_design.md). From then on the base law stays in control for the rest of
+    the episode. Every command, learned or not, passes the safety filter when one is
+    given. The design and what was tried before it are in docs/task_design.md
+    ("The handover hybrid").
+
+    Parameters
+    ----------
+    learned : TrainedAgent
+        A trained agent (:class:`~tether_gym_agents.trained.TrainedAgent`) on this
+        env's observation. Trained with ``action_mode="increment"`` (its recorded env
+        arguments say so), its action a becomes the command
+        u = clip(u_obs + increment_gain * a, -1, 1) from the observed command u_obs,
+        the increment env's own update (up to the float32 rounding of u_obs);
+        trained in rate mode, a is the command.
+    base : SlidingModeController
+        The base law (rate mode).
+    safety_filter : SafetyFilter or None
+        Filter of every command (None: unfiltered).
+    enter : float or None
+        Largest max_i |s_i| [rad/rad] at the handover, > 0; None: eps / 2.
+    command_bound : float
+        Largest max_i |u_i| [-] of the base law's normalised command at the handover,
+        in (0, 1] (default 0.5).
+    layout : ObservationLayout or None
+        How to read the observation; None takes ``base.layout``.
+
+    Notes
+    -----
+    The mode is the recurrent ``state`` of stable-baselines3's ``predict``: a (B,)
+    float array, 1.0 where the base law is in control. ``episode_start`` (or
+    ``state=None``) starts an episode with the learned policy. ``last_mode`` holds the
+    mode of the last call's actions.
+    """
+
+    def __init__(self, learned, base, safety_filter: SafetyFilter | None = None,
+                 enter: float | None = None, command_bound: float = 0.5,
+                 layout: ObservationLayout | None = None):
+        from .smc import SlidingModeController
+
+        if not hasattr(learned, "predict"):
+            raise TypeError(f"learned must have a predict method, got "
+                            f"{type(learned).__name__}")
+        if not isinstance(base, SlidingModeController):
+            raise TypeError(f"base must be a SlidingModeController, got "
+                            f"{type(base).__name__}")
+        if safety_filter is not None and not isinstance(safety_filter, SafetyFilter):
+            raise TypeError(f"safety_filter must be a SafetyFilter or None, got "
+                            f"{type(safety_filter).__name__}")
+        self.learned = learned
+        self.base = base
+        self.safety_filter = safety_filter
+        self.layout = _layout_of(base, layout)
+        self.layout.require_rate_mode(type(self).__name__)
+        self.enter = check_range("enter", base.eps / 2 if enter is None else enter, 0.0,
+                                 low_open=True)
+        self.command_bound = check_range("command_bound", command_bound, 0.0, 1.0,
+                                         low_open=True)
+        self.increment_gain = _increment_gain(learned)
+        self.last_mode: np.ndarray | None = None
+        self._init_counts()
+
+    def _parts(self) -> tuple:
+        return (self.learned, self.base)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """stable-baselines3 interface: (action, mode); the learned part is deterministic."""
+        batch, single = self.layout.as_batch(observation)
+        b = batch.shape[0]
+        mode = (np.zeros(b, dtype=bool) if state is None
+                else np.asarray(state, dtype=np.float64).reshape(b) > 0.5)
+        if episode_start is not None:
+            mode &= ~np.asarray(episode_start, dtype=bool).reshape(b)
+        base, _ = self.base.predict(batch, deterministic=True)
+        base = np.asarray(base, dtype=np.float64).reshape(b, -1)
+        near = np.abs(self.base.sliding_variable(batch)).max(axis=1) <= self.enter
+        mode |= near & (np.abs(base).max(axis=1) <= self.command_bound)
+        action = base.copy()
+        if not mode.all():
+            rows = batch[~mode]
+            a, _ = self.learned.predict(rows.astype(np.float32), deterministic=True)
+            a = np.asarray(a, dtype=np.float64).reshape(-1, action.shape[1])
+            if self.increment_gain is not None:
+                u = self.layout.split(rows).command.astype(np.float64)
+                a = u + self.increment_gain * a
+            action[~mode] = np.clip(a, -1.0, 1.0)
+        self.last_mode = mode.copy()
+        out = self._filter(batch, action).astype(np.float32)
+        return (out[0] if single else out), mode.astype(np.float64)
+
+    def __repr__(self) -> str:
+        return (f"HandoverPolicy(learned={self.learned!r}, base={self.base!r}, "
+                f"enter={self.enter}, command_bound={self.command_bound}, "
+                f"filtered={self.safety_filter is not None})")
+
+
+def _increment_gain(learned) -> float | None:
+    """The increment gain of a policy trained with ``action_mode="increment"``, else None.
+
+    Read from the recorded env arguments (``learned.env_kwargs``), the env's defaults
+    where absent; a policy without recorded arguments is taken to command rates.
+    """
+    from tether_gym.envs.config import Action
+
+    kwargs = getattr(learned, "env_kwargs", None)
+    if kwargs is None:
+        return None
+    default = Action()
+    if kwargs.get("action_mode", default.mode) != "increment":
+        return None
+    return float(kwargs.get("increment_gain", default.increment_gain))

@@ -9,10 +9,16 @@ called through stable-baselines3's interface, ``policy.predict(obs, deterministi
 with **one observation per call** (``obs[i:i + 1]``): a batched forward pass of a torch
 network changes an action by ~1e-7 with the batch size, which a closed loop can amplify
 into a different episode. The exception are policies that declare ``batch_invariant``
-(trained MLPs, :mod:`tether_gym_agents.mlp`): their rows are bitwise independent of
-the batch, so the episodes that share one get a single call. Either way an episode's
-actions depend on its seed, the env arguments and the policy only, never on how many
-episodes run beside it or in which order the policies are evaluated.
+(trained MLPs, :mod:`tether_gym_agents.mlp`; the sliding-mode law, the safety filter
+and the hybrids built of such parts): their rows are bitwise independent of the batch,
+so the episodes that share one get a single call. Either way an episode's actions
+depend on its seed, the env arguments and the policy only, never on how many episodes
+run beside it or in which order the policies are evaluated.
+
+A policy with memory keeps it in stable-baselines3's recurrent ``state``: ``predict``
+returns ``(actions, state)`` with one state row per observation, and gets that row back
+on the episode's next call (``episode_start`` is True on its first). A policy with a
+safety filter reports which rows it changed in ``last_filter_active`` ((B,) bool).
 """
 
 from __future__ import annotations
@@ -193,27 +199,34 @@ def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajec
     actions = np.zeros((num, n_act), dtype=np.float32)
     filtered: list[list[bool]] = [[] for _ in range(num)]
     step = 0
+    states: list = [None] * num  # each episode's recurrent state row (None: none)
+    started = np.zeros(num, dtype=bool)
     # a batch-invariant policy shared by several episodes gets their observations in
     # one call (row i of the batch is bitwise row i alone); every other policy one each
-    shared: dict[int, list[int]] = {}
+    groups: dict[int, list[int]] = {}
     for i, policy in enumerate(policies):
-        if getattr(policy, "batch_invariant", False):
-            shared.setdefault(id(policy), []).append(i)
-    batched = {i for rows_ in shared.values() for i in rows_}
+        group = id(policy) if getattr(policy, "batch_invariant", False) else -1 - i
+        groups.setdefault(group, []).append(i)
     while active.any():
-        for rows_ in shared.values():
-            idx = [i for i in rows_ if active[i]]
-            if idx:
-                action, _ = policies[idx[0]].predict(obs[idx], deterministic=True)
-                actions[idx] = _checked(action, policies[idx[0]], n_act, len(idx))
-        for i in np.flatnonzero(active).tolist():
-            if i in batched:
+        for members in groups.values():
+            idx = [i for i in members if active[i]]
+            if not idx:
                 continue
-            action, _ = policies[i].predict(obs[i:i + 1], deterministic=True)
-            actions[i] = _checked(action, policies[i], n_act, 1)[0]
-            flag = getattr(policies[i], "last_filter_active", None)
+            policy = policies[idx[0]]
+            held = [states[i] for i in idx]
+            state = None if any(h is None for h in held) else np.stack(held)
+            action, new_state = policy.predict(obs[idx], state=state,
+                                               episode_start=~started[idx],
+                                               deterministic=True)
+            started[idx] = True
+            actions[idx] = _checked(action, policy, n_act, len(idx))
+            if new_state is not None:
+                for j, i in enumerate(idx):
+                    states[i] = np.asarray(new_state)[j]
+            flag = getattr(policy, "last_filter_active", None)
             if flag is not None:
-                filtered[i].append(bool(flag))
+                for i, f in zip(idx, np.asarray(flag, dtype=bool).reshape(-1), strict=True):
+                    filtered[i].append(bool(f))
         actions[~active] = 0.0
         obs, reward, terminated, trunc, info = venv.step(actions)
         step += 1

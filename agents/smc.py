@@ -40,6 +40,10 @@ class SlidingModeController(ReelRatePolicy):
         on them instead of ``model`` (default True).
     """
 
+    batch_invariant = True
+    """Each row's action is bitwise the same in any batch (row-wise NumPy and a batched
+    LAPACK solve per row), so rollouts batch the episodes that share the law."""
+
     def __init__(self, model: TetherChain, layout: ObservationLayout, c: float = 1.0,
                  k: float = 1.0, eps: float = 0.1, use_observed_params: bool = True):
         if not isinstance(model, TetherChain):
@@ -77,13 +81,20 @@ class SlidingModeController(ReelRatePolicy):
         st = lay.split(obs)
         nu = np.arctan2(st.sin_nu, st.cos_nu)
         ddref = -lay.frequency**2 * st.theta_ref
-        err = st.theta - st.theta_ref[:, None]
         derr = st.dtheta - st.dtheta_ref[:, None]
-        s = self.c * err + derr
-        sat = np.clip(s / self.eps, -1.0, 1.0)
+        sat = np.clip(self._surface(st) / self.eps, -1.0, 1.0)
         f, B = self._affine(nu, st)
         rhs = f + self.c * derr - ddref[:, None] + self.k * sat
         return -np.linalg.solve(B, rhs[..., None])[..., 0]
+
+    def sliding_variable(self, obs: np.ndarray) -> np.ndarray:
+        """s of Eq. 12 [rad/rad] for a batch of observations (B, obs_dim) -> (B, N-1)."""
+        return self._surface(self.layout.split(obs))
+
+    def _surface(self, st) -> np.ndarray:
+        err = st.theta - st.theta_ref[:, None]
+        derr = st.dtheta - st.dtheta_ref[:, None]
+        return self.c * err + derr
 
     def _affine(self, nu, st):
         if self.use_observed_params and st.eccentricity is not None:

@@ -111,11 +111,11 @@ def test_seed_folder_is_one_policy_with_several_runs(tmp_path):
 @needs_ppo
 def test_episodes_do_not_depend_on_seed_count_threads_or_order():
     kwargs = dict(out=None, log=None, env_kwargs={"orbits_per_episode": 0.3})
-    two = evaluation.evaluate(["smc", "random", "ppo"], "paper", 2, **kwargs)
-    five = evaluation.evaluate(["ppo", "random", "smc"], "paper", 5, torch_threads=2,
-                               **kwargs)
+    names = ["smc", "smc_filtered", "random", "ppo", "handover:ppo"]
+    two = evaluation.evaluate(names, "paper", 2, **kwargs)
+    five = evaluation.evaluate(names[::-1], "paper", 5, torch_threads=2, **kwargs)
     try:
-        for policy in ("smc", "random", "ppo"):
+        for policy in names:
             a, b = _episodes(two, policy), _episodes(five, policy)
             assert set(a) <= set(b)
             for key in a:
@@ -291,3 +291,16 @@ def test_env_kwargs_are_literals_never_code():
         assert str(exc.value).startswith("--env-kwargs")
     with pytest.raises(ValueError, match="given twice"):
         parse_env_kwargs(["a=1", "a=2"])
+
+
+@needs_ppo
+def test_handover_names_a_hybrid_of_a_trained_agent():
+    spec = evaluation.resolve_policy("handover:ppo")
+    assert spec.kind is evaluation.PolicyKind.HYBRID and spec.handover
+    assert spec.runs == evaluation.resolve_policy("ppo").runs
+    assert spec.env_kwargs == {"action_mode": "rate"}
+    assert "handover:ppo" in evaluation.default_policies()
+    with pytest.raises(ValueError, match="acts alone"):
+        evaluation.resolve_policy("handover:smc")
+    with pytest.raises(ValueError, match="unknown policy"):
+        evaluation.resolve_policy("handover:nothing")

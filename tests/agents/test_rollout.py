@@ -68,3 +68,32 @@ def test_rollout_rejects_bad_policies():
         rollout([_Wrong(), _Wrong()], [0, 1, 2], KWARGS)
     with pytest.raises(ValueError, match=r"action of shape \(1, 3\)"):
         rollout(_Wrong(), [0], KWARGS)
+
+
+class _Counter:
+    """A batch-invariant policy with memory: its state counts its calls per episode."""
+
+    batch_invariant = True
+
+    def __init__(self):
+        self.calls = []
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        b = obs.shape[0]
+        count = np.zeros(b) if state is None else np.asarray(state).copy()
+        count[np.asarray(episode_start, dtype=bool)] = 0.0
+        self.calls.append((b, None if state is None else np.asarray(state).copy(),
+                           np.asarray(episode_start, dtype=bool).copy()))
+        return np.zeros((b, 2), dtype=np.float32), count + 1.0
+
+
+def test_recurrent_state_rows_come_back_to_their_episode():
+    counter = _Counter()
+    kwargs = {**KWARGS, "orbits_per_episode": 0.05}
+    trajs = rollout(counter, [0, 1, 2], kwargs)
+    assert len(counter.calls) == trajs[0].steps  # one batched call per step
+    first, *rest = counter.calls
+    assert first[0] == 3 and first[1] is None and first[2].all()
+    for k, (b, state, start) in enumerate(rest, start=1):
+        assert b == 3 and not start.any()
+        np.testing.assert_array_equal(state, [k, k, k])
