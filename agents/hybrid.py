@@ -51,6 +51,25 @@ class _Filtering:
     layout: ObservationLayout
     safety_filter: SafetyFilter | None
 
+    def _setup(self, safety_filter, source, layout: ObservationLayout | None,
+               optional: bool = True) -> None:
+        """Keep the checked filter and layout, and zero the counters.
+
+        The filter may be None when ``optional``; the layout is ``layout``, else
+        ``source.layout``, and must take reel rates.
+        """
+        if not (isinstance(safety_filter, SafetyFilter)
+                or (optional and safety_filter is None)):
+            raise TypeError(f"safety_filter must be a SafetyFilter{' or None' * optional}, "
+                            f"got {type(safety_filter).__name__}")
+        self.safety_filter = safety_filter
+        self.layout = _layout_of(source, layout)
+        self.layout.require_rate_mode(type(self).__name__)
+        if safety_filter is not None and safety_filter.n != self.layout.n_tethers:
+            raise ValueError(f"the filter is for {safety_filter.n} tethers, the policy's env "
+                             f"has {self.layout.n_tethers}")
+        self._init_counts()
+
     def _init_counts(self) -> None:
         self.steps = 0
         """Filtered actions so far (one per observation)."""
@@ -129,17 +148,8 @@ class FilteredPolicy(_Filtering):
                  layout: ObservationLayout | None = None):
         if not hasattr(policy, "predict"):
             raise TypeError(f"policy must have a predict method, got {type(policy).__name__}")
-        if not isinstance(safety_filter, SafetyFilter):
-            raise TypeError(f"safety_filter must be a SafetyFilter, got "
-                            f"{type(safety_filter).__name__}")
         self.policy = policy
-        self.safety_filter = safety_filter
-        self.layout = _layout_of(policy, layout)
-        self.layout.require_rate_mode(type(self).__name__)
-        if safety_filter.n != self.layout.n_tethers:
-            raise ValueError(f"the filter is for {safety_filter.n} tethers, the policy's env "
-                             f"has {self.layout.n_tethers}")
-        self._init_counts()
+        self._setup(safety_filter, policy, layout, optional=False)
 
     def _parts(self) -> tuple:
         return (self.policy,)
@@ -187,16 +197,10 @@ class ResidualPolicy(_Filtering):
         for name, obj in (("base", base), ("residual_model", residual_model)):
             if not hasattr(obj, "predict"):
                 raise TypeError(f"{name} must have a predict method, got {type(obj).__name__}")
-        if safety_filter is not None and not isinstance(safety_filter, SafetyFilter):
-            raise TypeError(f"safety_filter must be a SafetyFilter or None, got "
-                            f"{type(safety_filter).__name__}")
         self.base = base
         self.residual_model = residual_model
         self.scale = check_range("scale", scale, 0.0)
-        self.safety_filter = safety_filter
-        self.layout = _layout_of(base, layout)
-        self.layout.require_rate_mode(type(self).__name__)
-        self._init_counts()
+        self._setup(safety_filter, base, layout)
 
     def _parts(self) -> tuple:
         return (self.base, self.residual_model)
@@ -273,21 +277,15 @@ class HandoverPolicy(_Filtering):
         if not isinstance(base, SlidingModeController):
             raise TypeError(f"base must be a SlidingModeController, got "
                             f"{type(base).__name__}")
-        if safety_filter is not None and not isinstance(safety_filter, SafetyFilter):
-            raise TypeError(f"safety_filter must be a SafetyFilter or None, got "
-                            f"{type(safety_filter).__name__}")
         self.learned = learned
         self.base = base
-        self.safety_filter = safety_filter
-        self.layout = _layout_of(base, layout)
-        self.layout.require_rate_mode(type(self).__name__)
+        self._setup(safety_filter, base, layout)
         self.enter = check_range("enter", base.eps / 2 if enter is None else enter, 0.0,
                                  low_open=True)
         self.command_bound = check_range("command_bound", command_bound, 0.0, 1.0,
                                          low_open=True)
         self.increment_gain = _increment_gain(learned)
         self.last_mode: np.ndarray | None = None
-        self._init_counts()
 
     def _parts(self) -> tuple:
         return (self.learned, self.base)
