@@ -17,13 +17,14 @@ from __future__ import annotations
 
 import functools
 import weakref
+from typing import NamedTuple
 
 import numpy as np
 
 from ..physics.dispatch import Direct
 from ..physics.kernels import Substeps
 from ..physics.state import STATE
-from ..tasks.reference import desired_libration, periodic_reel_rate
+from ..tasks.reference import desired_libration, expand_like, periodic_reel_factors
 from ..tasks.reward import COMPONENTS
 from .config import EnvConfig
 from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
@@ -114,6 +115,59 @@ def _stop_workers(workers: list[ChunkWorker]) -> None:
         workers.pop().stop()
 
 
+class StartPlan(NamedTuple):
+    """What every reset of one configuration reads, read from the config once.
+
+    The reset of a few rows of a vector env costs mostly Python and NumPy call
+    overhead, so the values are kept here instead of being looked up through the
+    config's parts, and the parts of the start that do not depend on the draws (the
+    reference at the configured nu(0), and Eq. 10's factors when e is fixed) are
+    computed once, by the same expressions, so the start is bitwise the same.
+    """
+
+    eccentricity: float
+    masses: np.ndarray
+    randomised: bool
+    eccentricity_range: tuple | None
+    mass_range: float | None
+    obs_noise: float
+    init_theta_range: float
+    init_dtheta_range: float
+    init_length_range: float
+    initial_theta: np.ndarray
+    initial_lengths: np.ndarray
+    amplitude: float
+    frequency: float
+    nu0: float
+    ref: float
+    dref: float
+    eq10: tuple | None  # (num, den) of Eq. 10 at nu0 and the fixed e; None when e is drawn
+    episode_length: float
+    length_bounds: tuple
+    slices: dict
+
+    @classmethod
+    def of(cls, config: EnvConfig) -> StartPlan:
+        """The plan of ``config``."""
+        rnd = config.randomisation
+        nu0 = float(config.initial_nu)
+        amplitude, frequency = config.amplitude, config.frequency
+        ref, dref, _ = desired_libration(nu0, amplitude, frequency)
+        eq10 = None
+        if rnd.eccentricity_range is None:
+            like = np.zeros((1, config.n_tethers))
+            eq10 = periodic_reel_factors(expand_like(nu0, like), expand_like(ref, like),
+                                         expand_like(dref, like),
+                                         np.full((1, 1), config.eccentricity),
+                                         amplitude, frequency)
+        return cls(config.eccentricity, np.asarray(config.masses, dtype=float),
+                   config.randomised, rnd.eccentricity_range, rnd.mass_range, rnd.obs_noise,
+                   rnd.init_theta_range, rnd.init_dtheta_range, rnd.init_length_range,
+                   np.asarray(config.initial_theta), np.asarray(config.initial_lengths),
+                   amplitude, frequency, nu0, ref, dref, eq10, config.episode_length,
+                   config.episode.length_bounds, STATE.slices(config.n_tethers))
+
+
 class ChainBatch:
     """Arrays and step logic for ``num`` environments with one :class:`EnvConfig`."""
 
@@ -137,6 +191,7 @@ class ChainBatch:
             steps=np.zeros(num, dtype=np.int64), nu_end=np.zeros(num),
             truncated=np.zeros(num, dtype=np.bool_), command=np.zeros((num, n)))
         self.cfg = step_config(config)
+        self._plan = StartPlan.of(config)
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
         # standard uniform / normal variates of each draw, and their rows as views
         # (built once: rng.random(out=...) then costs no view per draw)
@@ -220,10 +275,9 @@ class ChainBatch:
     def _failed_at_start(self, rows: np.ndarray) -> np.ndarray:
         """Mask of the listed rows whose initial state is non-finite or failed."""
         r = self.rows
-        n = self.n
-        sl = STATE.slices(n)
+        sl = self._plan.slices
         y = r.y[rows]
-        lo, hi = self.config.episode.length_bounds
+        lo, hi = self._plan.length_bounds
         length = y[:, sl["length"]]
         tension = r.tension[rows]
         return (~np.isfinite(y).all(axis=1) | ~np.isfinite(tension).all(axis=1)
@@ -241,48 +295,59 @@ class ChainBatch:
 
     def _draw_rows(self, rows: np.ndarray, rngs, opts: dict) -> None:
         """One draw of the listed rows' parameters and initial states, then their start."""
-        cfg = self.config
-        rnd = cfg.randomisation
-        mass_range = 0.0 if rnd.mass_range is None else rnd.mass_range
+        plan = self._plan
+        mass_range = 0.0 if plan.mass_range is None else plan.mass_range
         n = self.n
         count = rows.shape[0]
-        ecc = np.full(count, cfg.eccentricity)
-        scale = np.ones((count, n)) if rnd.mass_range is not None else None
+        ecc = np.full(count, plan.eccentricity)
+        scale = np.ones((count, n)) if plan.mass_range is not None else None
         unit = np.empty((count, 3 * n))
+        noise = plan.obs_noise > 0.0
         for i, b in enumerate(rows.tolist()):
             rng = rngs[b]
-            if rnd.eccentricity_range is not None:
-                ecc[i] = rng.uniform(*rnd.eccentricity_range)
+            if plan.eccentricity_range is not None:
+                ecc[i] = rng.uniform(*plan.eccentricity_range)
             if scale is not None:
                 scale[i] = rng.uniform(1.0 - mass_range, 1.0 + mass_range, n)
             unit[i] = rng.uniform(-1.0, 1.0, 3 * n)
-            if rnd.obs_noise > 0.0:
+            if noise:
                 rng.standard_normal(out=self._gauss_rows[b])
-        if rnd.obs_noise > 0.0:
+        if noise:
             self._scale_noise(rows)
         r = self.rows
-        if cfg.randomised:
-            masses = np.asarray(cfg.masses, dtype=float)
-            r.par[rows] = cfg.param_rows(ecc, masses if scale is None else masses * scale)
+        if plan.randomised:
+            masses = plan.masses
+            r.par[rows] = self.config.param_rows(ecc, masses if scale is None else masses * scale)
         else:  # the nominal row, built once in __init__
             r.par[rows] = self._par_nominal
-        nu0 = float(opts.get("nu", cfg.initial_nu))
-        ref, dref, _ = desired_libration(nu0, cfg.amplitude, cfg.frequency)
+        nu0 = float(opts["nu"]) if "nu" in opts else plan.nu0
+        at_plan = nu0 == plan.nu0
+        if at_plan:
+            ref, dref = plan.ref, plan.dref
+        else:
+            ref, dref, _ = desired_libration(nu0, plan.amplitude, plan.frequency)
         shape = (count, n)
         theta = (np.broadcast_to(opts["theta"], shape) if "theta" in opts else
-                 np.asarray(cfg.initial_theta) + unit[:, :n] * rnd.init_theta_range)
+                 plan.initial_theta + unit[:, :n] * plan.init_theta_range)
         dtheta = (np.broadcast_to(opts["dtheta"], shape) if "dtheta" in opts else
-                  dref + unit[:, n:2 * n] * rnd.init_dtheta_range)
+                  dref + unit[:, n:2 * n] * plan.init_dtheta_range)
         length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
-                  np.asarray(cfg.initial_lengths) + unit[:, 2 * n:] * rnd.init_length_range)
+                  plan.initial_lengths + unit[:, 2 * n:] * plan.init_length_range)
         # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference
         # (infinite where theta_d' = -1: such a start is refused below)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            dlength = (np.broadcast_to(opts["dlength"], shape) if "dlength" in opts else
-                       periodic_reel_rate(nu0, ref, dref, length, ecc[:, None], cfg.amplitude,
-                                          cfg.frequency))
+        if "dlength" in opts:
+            dlength = np.broadcast_to(opts["dlength"], shape)
+        else:
+            if at_plan and plan.eq10 is not None:
+                num, den = plan.eq10
+            else:
+                num, den = periodic_reel_factors(expand_like(nu0, length), expand_like(ref, length),
+                                                 expand_like(dref, length), ecc[:, None],
+                                                 plan.amplitude, plan.frequency)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                dlength = length * num / den
         r.nu[rows] = nu0
-        r.nu_end[rows] = nu0 + cfg.episode_length
+        r.nu_end[rows] = nu0 + plan.episode_length
         fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
         r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
         r.failure[rows] = 0

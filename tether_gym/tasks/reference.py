@@ -21,6 +21,8 @@ __all__ = [
     "zero_state_reel_rate",
     "zero_state_length",
     "periodic_reel_rate",
+    "periodic_reel_factors",
+    "expand_like",
     "periodic_length_small_amplitude",
     "tension_positivity_polynomial",
 ]
@@ -41,8 +43,12 @@ def desired_libration(nu, amplitude, frequency):
 desired_libration_jit = njit(**INLINE)(desired_libration)
 
 
-def _expand(nu, like):
-    """nu with a trailing axis when ``like`` has one more axis (per-tether values)."""
+def expand_like(nu, like):
+    """nu as a float array, with a trailing axis when ``like`` has one more axis.
+
+    Pairs per-episode values (nu, theta_d, ...) of shape (...) with per-tether values of
+    shape (..., n).
+    """
     nu = np.asarray(nu, dtype=float)
     return nu[..., None] if np.ndim(like) > nu.ndim else nu
 
@@ -50,7 +56,7 @@ def _expand(nu, like):
 def zero_state_reel_rate(nu, length, e):
     """Paper Eq. 7: l_i' = l_i e sin(nu) / (1 + e cos(nu)) keeps theta = theta' = 0."""
     length = np.asarray(length, dtype=float)
-    nu = _expand(nu, length)
+    nu = expand_like(nu, length)
     return length * e * np.sin(nu) / (1.0 + e * np.cos(nu))
 
 
@@ -75,14 +81,22 @@ def periodic_reel_rate(nu, theta, dtheta, length, e, amplitude, frequency=1.0):
     state. ``nu`` of shape (...) pairs with ``length`` of shape (..., n).
     """
     length = np.asarray(length, dtype=float)
-    nu = _expand(nu, length)
-    theta = _expand(theta, length)
-    dtheta = _expand(dtheta, length)
+    num, den = periodic_reel_factors(expand_like(nu, length), expand_like(theta, length),
+                                     expand_like(dtheta, length), e, amplitude, frequency)
+    return length * num / den
+
+
+def periodic_reel_factors(nu, theta, dtheta, e, amplitude, frequency=1.0):
+    """(num, den) of Eq. 10, l_i' = l_i num / den (see :func:`periodic_reel_rate`).
+
+    num = 4 e sin(nu)(1 + theta') + 2 A k w^2 sin(w nu) - 3 sin(2 theta),
+    den = 4 k (1 + theta'), k = 1 + e cos(nu); elementwise, broadcasting the arguments.
+    """
     k = 1.0 + e * np.cos(nu)
     num = (4.0 * e * np.sin(nu) * (1.0 + dtheta)
            + 2.0 * amplitude * k * frequency**2 * np.sin(frequency * nu)
            - 3.0 * np.sin(2.0 * theta))
-    return length * num / (4.0 * k * (1.0 + dtheta))
+    return num, 4.0 * k * (1.0 + dtheta)
 
 
 def periodic_length_small_amplitude(nu, length0, e, amplitude):
