@@ -322,14 +322,34 @@ def test_returned_arrays_are_not_reused():
     assert not np.any(info3["theta"] == 7.0) and info3["_theta"].all()
 
 
-def test_threaded_kernel_gives_the_serial_results():
+@pytest.mark.parametrize("lead", [None, 0.0, 11.0, 1e9])
+def test_threaded_kernel_gives_the_serial_results(lead):
     kwargs = dict(FAILING, disturbance=0.1, obs_noise=0.01)
     serial = TetherLibrationVectorEnv(37, parallel=False, **kwargs)
     threaded = TetherLibrationVectorEnv(37, parallel=True, **kwargs)
+    if lead is not None:  # a fixed split of the rows between the threads
+        threaded._batch._adjust_lead = lambda *args: None
+        threaded._batch._lead = lead
     acts = actions_for("failing", 37, 1, 25)
     assert_identical(serial.reset(seed=2), threaded.reset(seed=2))
     for t in range(25):
         assert_identical(serial.step(acts[t]), threaded.step(acts[t]), f"step {t}")
+    assert len(threaded._batch._workers) == 1  # the steps did run on two threads
+
+
+def test_the_lead_moves_towards_workers_that_end_just_before_the_caller():
+    from tether_gym.envs.batch import LEAD_MARGIN, ChainBatch
+
+    batch = ChainBatch(TetherLibrationVectorEnv(4).config, 4)
+    batch._lead = 10.0
+    batch._adjust_lead(late=-LEAD_MARGIN * 1e-6, per_row=1e-6, most=100)
+    assert batch._lead == 10.0  # on target: unchanged
+    batch._adjust_lead(late=20e-6, per_row=1e-6, most=100)  # worker 20 rows late
+    assert batch._lead == pytest.approx(10.0 + 0.5 * (20 + LEAD_MARGIN))
+    batch._adjust_lead(late=-1.0, per_row=1e-6, most=100)
+    assert batch._lead == 0.0
+    batch._adjust_lead(late=1.0, per_row=1e-6, most=100)
+    assert batch._lead == 100.0
 
 
 def test_render_rgb_array_gives_one_frame_per_env():

@@ -16,6 +16,7 @@ contiguous chunks of rows, each with its own scratch.
 from __future__ import annotations
 
 import functools
+import time
 import weakref
 from typing import NamedTuple
 
@@ -39,6 +40,9 @@ RESET_OPTION_KEYS = ("nu",) + STATE.names
 
 OPTION_BOUNDS = {"nu": 1.0e4, "dtheta": 10.0, "dlength": 10.0}
 """Largest magnitude of the unbounded reset options [rad, rad/rad, -]."""
+
+LEAD_MARGIN = 2.0
+"""Rows by which a threaded step's workers should end before the calling thread [-]."""
 
 MAX_RESET_DRAWS = 100
 """Draws per row before a configuration whose initial states all fail is rejected."""
@@ -204,6 +208,8 @@ class ChainBatch:
         self._step = Direct(step_rows)
         self._work = [new_row_work(n)]  # one scratch per thread
         self._workers: list[ChunkWorker] = []  # started by the first threaded step
+        self._lead = 0.0  # extra rows of this thread's chunk in a threaded step
+        self._chunk_ends = [0.0]  # when each worker's chunk of the last threaded step ended
         self._finalizer = weakref.finalize(self, _stop_workers, self._workers)
 
     # views kept for readability (the arrays live in self.rows)
@@ -392,23 +398,52 @@ class ChainBatch:
         return -1 if ok.all() else int(index[np.argmin(ok)])
 
     def _step_threaded(self, action: np.ndarray, rows: np.ndarray, n_chunks: int) -> None:
-        """Chunks 1.. on the worker threads, chunk 0 on this one; wait for all."""
+        """Chunks 1.. on the worker threads, chunk 0 on this one; wait for all.
+
+        This thread's chunk is longer than the workers' by ``self._lead`` rows: a worker
+        starts some tens of microseconds after it is woken, and this thread would then
+        sleep until the last worker is done and be woken in turn. The lead is adjusted
+        after every step so that the workers finish just before this thread does
+        (:meth:`_adjust_lead`); which thread steps a row does not change its result.
+        """
         while len(self._work) < n_chunks:
             self._work.append(new_row_work(self.n))
         while len(self._workers) < n_chunks - 1:
             self._workers.append(ChunkWorker())
+            self._chunk_ends.append(0.0)
         count = len(rows)
-        bounds = [c * count // n_chunks for c in range(n_chunks + 1)]
+        lead = min(int(self._lead), count // n_chunks)
+        share = (count - lead) / n_chunks
+        bounds = [0] + [lead + round(c * share) for c in range(1, n_chunks)] + [count]
+        ends = self._chunk_ends
         for c in range(1, n_chunks):
             self._workers[c - 1].start(functools.partial(
-                self._step, rows[bounds[c]:bounds[c + 1]], action, self.rows, self.cfg,
-                self._work[c], False))
+                self._timed_chunk, c, rows[bounds[c]:bounds[c + 1]], action))
+        start = time.perf_counter()
         try:
-            self._step(rows[bounds[0]:bounds[1]], action, self.rows, self.cfg, self._work[0],
-                       False)
+            self._step(rows[:bounds[1]], action, self.rows, self.cfg, self._work[0], False)
         finally:
+            end = time.perf_counter()
             for c in range(1, n_chunks):
                 self._workers[c - 1].wait()
+        self._adjust_lead(max(ends[1:n_chunks]) - end, (end - start) / max(bounds[1], 1),
+                          count // n_chunks)
+
+    def _timed_chunk(self, c: int, rows: np.ndarray, action: np.ndarray) -> None:
+        """Worker c's part of a threaded step; records when it ended."""
+        self._step(rows, action, self.rows, self.cfg, self._work[c], False)
+        self._chunk_ends[c] = time.perf_counter()
+
+    def _adjust_lead(self, late: float, per_row: float, most: int) -> None:
+        """Move the lead towards workers that end ``LEAD_MARGIN`` rows before this thread.
+
+        ``late`` [s] is how much later than this thread the last worker ended (negative:
+        earlier), ``per_row`` [s] this thread's time per row; half the error is corrected
+        per step (a damped loop: single steps jitter), within [0, ``most``] rows.
+        """
+        if per_row > 0.0:
+            error = late / per_row + LEAD_MARGIN
+            self._lead = min(max(self._lead + 0.5 * error, 0.0), float(most))
 
     def close(self) -> None:
         """Stop the worker threads (if any were started)."""
