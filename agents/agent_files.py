@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import warnings
 from pathlib import Path
 from typing import Any
@@ -508,6 +509,23 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
                       training=training, hybrid=run_hybrid(cfg))
 
 
+_SEED_DIR = re.compile(r"seed_(\d+)\Z")
+
+
+def seed_runs(folder) -> list[Path]:
+    """The ``seed_K`` run folders of a folder of seed runs, by K (empty if none).
+
+    The layout that ``train.py --seeds N`` writes and that the evaluation reads as one
+    policy with one run per seed.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    found = [(int(m.group(1)), p) for p in folder.iterdir()
+             if p.is_dir() and (m := _SEED_DIR.match(p.name))]
+    return [p for _, p in sorted(found)]
+
+
 EXPORTED_FILES = (AGENT_FILE, WEIGHTS_FILE, "config.yml", "args.yml", "command.txt",
                   "train_info.json", "learning_curve.png", "eval/evaluations.npz")
 """What :func:`export_runs` copies of a run folder: the safe agent, how it was trained
@@ -526,7 +544,7 @@ def export_runs(src, dest) -> list[Path]:
     import shutil
 
     src, dest = Path(src), Path(dest)
-    runs = sorted((p for p in src.glob("seed_*") if p.is_dir()), key=lambda p: p.name)
+    runs = seed_runs(src)
     pairs = [(run, dest / run.name) for run in runs] if runs else [(src, dest)]
     for run, _ in pairs:
         if not is_unit(run):

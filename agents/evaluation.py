@@ -32,7 +32,6 @@ it behind the safety filter, on the same nominal model.
 from __future__ import annotations
 
 import argparse
-import re
 import shlex
 import sys
 import tempfile
@@ -46,6 +45,7 @@ import numpy as np
 
 import tether_gym
 
+from .agent_files import seed_runs
 from .env_kwargs import parse_env_kwargs
 from .metrics import episode_metrics
 from .rollout import Trajectory, rollout
@@ -60,7 +60,6 @@ ACTION_KEYS = ("action_mode", "increment_gain")
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
 MAX_SEED = 2**31 - 1
-_SEED_DIR = re.compile(r"seed_(\d+)\Z")
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
 HANDOVER_OF = ("ppo",)
@@ -101,11 +100,9 @@ class PolicySpec:
         its recorded env arguments, the env's defaults when absent). Nothing else of the
         training env is used: the scenario sets the rest.
         """
-        if self.kind is PolicyKind.BASELINE:
+        if self.kind is PolicyKind.BASELINE or self.handover:
             return dict(_rate_mode())
         self.load()
-        if self.handover:
-            return dict(_rate_mode())
         if self.kind is PolicyKind.HYBRID:
             modes = {agent.env_kwargs.get("action_mode", "rate") for agent in self.agents}
             if modes != {"rate"}:
@@ -146,9 +143,7 @@ class PolicySpec:
         episode's interventions); ``random`` gets a generator per episode, seeded with
         the episode's seed, so that its actions do not depend on the other episodes.
         """
-        from .obs import ReelRatePolicy
         from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
-        from .smc import SlidingModeController
 
         if self.handover:
             return [_handover(self.agents[run], env, scenario)] * len(seeds)
@@ -158,11 +153,12 @@ class PolicySpec:
             return [self.agents[run]] * len(seeds)
         if self.name == "random":
             return [RandomPolicy(env, seed=s) for s in seeds]
-        if self.name in ("smc", "smc_filtered"):
-            policy: ReelRatePolicy = SlidingModeController.for_env(
-                env, nominal=_nominal_model(env, scenario))
-            if self.name == "smc_filtered":
-                policy = _filtered(policy, env, scenario)
+        if self.name == "smc":
+            policy: object = _nominal_smc(env, scenario)
+        elif self.name == "smc_filtered":
+            from .hybrid import FilteredPolicy
+
+            policy = FilteredPolicy(_nominal_smc(env, scenario), _nominal_filter(env, scenario))
         elif self.name == "zero":
             policy = ZeroStateReel.for_env(env)
         else:
@@ -177,15 +173,25 @@ def _rate_mode() -> dict:
     return ReelRatePolicy.ENV_KWARGS
 
 
-def _nominal_model(env, scenario: Scenario):
-    """The TetherChain of ``scenario.nominal`` (None: the env's configured model)."""
-    if scenario.nominal is None:
-        return None
-    from tether_gym.physics import TetherChain
+def _nominal_smc(env, scenario: Scenario):
+    """The sliding-mode law designed on ``scenario.nominal`` (None: the env's own model)."""
+    from .smc import SlidingModeController
 
-    cfg = env.unwrapped.config
-    return TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
-                       cfg.gravity, cfg.scales.length_ratio)
+    nominal = None
+    if scenario.nominal is not None:
+        from tether_gym.physics import TetherChain
+
+        cfg = env.unwrapped.config
+        nominal = TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
+                              cfg.gravity, cfg.scales.length_ratio)
+    return SlidingModeController.for_env(env, nominal=nominal)
+
+
+def _nominal_filter(env, scenario: Scenario):
+    """The safety filter predicting with ``scenario.nominal`` (None: the env's own model)."""
+    from tether_gym.safety import SafetyFilter
+
+    return SafetyFilter.for_env(env, **(scenario.nominal or {}))
 
 
 def _residual(agent, env, scenario: Scenario):
@@ -194,45 +200,20 @@ def _residual(agent, env, scenario: Scenario):
     The sliding-mode law and the filter use the scenario's nominal model, as ``smc`` and
     ``smc_filtered`` do.
     """
-    from tether_gym.safety import SafetyFilter
-
     from .hybrid import ResidualPolicy
-    from .smc import SlidingModeController
 
     spec = agent.hybrid
     if spec is None:
         raise ValueError(f"{agent!r} records no hybrid: it is not the residual of one")
-    base = SlidingModeController.for_env(env, nominal=_nominal_model(env, scenario))
-    flt = SafetyFilter.for_env(env, **(scenario.nominal or {})) if spec["filter"] else None
-    return ResidualPolicy(base, agent, spec["scale"], flt)
+    flt = _nominal_filter(env, scenario) if spec["filter"] else None
+    return ResidualPolicy(_nominal_smc(env, scenario), agent, spec["scale"], flt)
 
 
 def _handover(agent, env, scenario: Scenario):
     """``agent`` handing over to SMC, filtered, both on the scenario's nominal model."""
-    from tether_gym.safety import SafetyFilter
-
     from .hybrid import HandoverPolicy
-    from .smc import SlidingModeController
 
-    base = SlidingModeController.for_env(env, nominal=_nominal_model(env, scenario))
-    return HandoverPolicy(agent, base, SafetyFilter.for_env(env, **(scenario.nominal or {})))
-
-
-def _filtered(policy, env, scenario: Scenario):
-    """``policy`` behind the safety filter on the same nominal model."""
-    from .hybrid import FilteredPolicy
-
-    nominal = scenario.nominal or {}
-    return FilteredPolicy.for_env(policy, env, **nominal)
-
-
-def _seed_runs(path: Path) -> list[Path]:
-    """The ``seed_K`` sub-folders of ``path``, by K (empty if none)."""
-    if not path.is_dir():
-        return []
-    found = [(int(m.group(1)), p) for p in path.iterdir()
-             if p.is_dir() and (m := _SEED_DIR.match(p.name))]
-    return [p for _, p in sorted(found)]
+    return HandoverPolicy(agent, _nominal_smc(env, scenario), _nominal_filter(env, scenario))
 
 
 def shipped_agents() -> dict[str, Path]:
@@ -277,7 +258,7 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
         valid = list(BASELINES) + list(shipped)
         raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
                          "agent (run folder, model file or folder of seed_K run folders)")
-    runs = _seed_runs(path) or [path]
+    runs = seed_runs(path) or [path]
     from .trained import hybrid_of
 
     hybrid = [hybrid_of(run) is not None for run in runs]

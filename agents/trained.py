@@ -27,6 +27,7 @@ from .agent_files import (
     load_agent,
     load_pickled_run,
     run_hybrid,
+    seed_runs,
 )
 from .mlp import NumpyMLP
 
@@ -250,6 +251,5 @@ def pretrained_agents() -> dict[str, Path]:
     if not PRETRAINED_DIR.is_dir():
         return {}
     return {p.name: p for p in sorted(PRETRAINED_DIR.iterdir())
-            if p.is_dir() and (find_unit(p) is not None or any(
-                q.is_dir() and q.name.startswith("seed_") and find_unit(q) is not None
-                for q in p.iterdir()))}
+            if p.is_dir() and (find_unit(p) is not None
+                               or any(find_unit(q) is not None for q in seed_runs(p)))}

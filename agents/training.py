@@ -34,7 +34,7 @@ import gymnasium as gym
 
 import tether_gym
 
-from .agent_files import save_agent
+from .agent_files import save_agent, seed_runs
 from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from .jsonio import to_jsonable
 from .residual_spec import ResidualSpec
@@ -281,8 +281,7 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     except ImportError:
         return None
     curves = {}
-    for run in sorted(Path(folder).glob("seed_*"), key=lambda p: int(p.name[5:])
-                      if p.name[5:].isdigit() else -1):
+    for run in seed_runs(folder):
         path = run / "eval" / "evaluations.npz"
         if path.is_file():
             data = np.load(path)

@@ -25,7 +25,12 @@ import numpy as np
 from ..physics.dispatch import Direct
 from ..physics.kernels import Substeps
 from ..physics.state import STATE
-from ..tasks.reference import desired_libration, expand_like, periodic_reel_factors
+from ..tasks.reference import (
+    desired_libration,
+    expand_like,
+    periodic_reel_factors,
+    periodic_reel_rate,
+)
 from ..tasks.reward import COMPONENTS
 from .config import EnvConfig
 from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
@@ -341,17 +346,15 @@ class ChainBatch:
                   plan.initial_lengths + unit[:, 2 * n:] * plan.init_length_range)
         # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference
         # (infinite where theta_d' = -1: such a start is refused below)
-        if "dlength" in opts:
-            dlength = np.broadcast_to(opts["dlength"], shape)
-        else:
-            if at_plan and plan.eq10 is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            if "dlength" in opts:
+                dlength = np.broadcast_to(opts["dlength"], shape)
+            elif at_plan and plan.eq10 is not None:  # periodic_reel_rate's last line
                 num, den = plan.eq10
-            else:
-                num, den = periodic_reel_factors(expand_like(nu0, length), expand_like(ref, length),
-                                                 expand_like(dref, length), ecc[:, None],
-                                                 plan.amplitude, plan.frequency)
-            with np.errstate(divide="ignore", invalid="ignore"):
                 dlength = length * num / den
+            else:
+                dlength = periodic_reel_rate(nu0, ref, dref, length, ecc[:, None],
+                                             plan.amplitude, plan.frequency)
         r.nu[rows] = nu0
         r.nu_end[rows] = nu0 + plan.episode_length
         fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
