@@ -20,7 +20,7 @@ from typing import Any
 
 from numba import njit
 
-from .jit import INLINE
+from .jit import SCALAR
 
 __all__ = ["Field", "Layout", "at"]
 
@@ -42,7 +42,7 @@ class Field:
     low, high : float
         Bounds of the value (observation space), -inf/inf when unbounded.
     optional : str or None
-        Name of the switch that includes the field (e.g. ``"params"``); optional
+        Name of the switch that includes the field (e.g. ``"eccentricity"``); optional
         fields must come after every mandatory one.
     """
 
@@ -129,11 +129,11 @@ class Layout:
         return f"Layout({self.name!r}, {list(self.names)})"
 
 
-@njit(**INLINE)
+@njit(**SCALAR)
 def at(spec, n):
     """Offset ``c0 + c1 n`` of a field whose :attr:`Layout.index` entry is ``spec``.
 
-    Compiled (and inlined) for the kernels; with ``spec`` a global constant numba
+    Compiled for the kernels; with ``spec`` a global constant LLVM inlines it and
     folds it to one addition.
     """
     return spec[0] + spec[1] * n
