@@ -57,6 +57,8 @@ __all__ = ["main", "evaluate", "resolve_policy", "make_policy", "default_policie
 BASELINES = ("smc", "smc_filtered", "zero", "periodic", "random")
 ACTION_KEYS = ("action_mode", "increment_gain")
 """Env arguments that define what a policy's action means."""
+OBSERVATION_KEYS = ("observe_params",)
+"""Env arguments that define what a policy's observation holds."""
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
 MAX_SEED = 2**31 - 1
@@ -93,27 +95,34 @@ class PolicySpec:
 
     @property
     def env_kwargs(self) -> dict:
-        """Env arguments the policy needs on every scenario (its action mode).
+        """Env arguments the policy needs on every scenario (its action mode and observation).
 
         The baselines and the hybrids command reel rates (``action_mode="rate"``); a
-        trained agent runs in the action mode it was trained in (:data:`ACTION_KEYS` of
-        its recorded env arguments, the env's defaults when absent). Nothing else of the
-        training env is used: the scenario sets the rest.
+        trained agent runs in the action mode it was trained in and sees what it saw
+        (:data:`ACTION_KEYS` and :data:`OBSERVATION_KEYS` of its recorded env arguments,
+        the env's defaults when absent); a handover hybrid's env gives its agent's
+        observation. Nothing else of the training env is used: the scenario sets the rest.
         """
-        if self.kind is PolicyKind.BASELINE or self.handover:
+        if self.kind is PolicyKind.BASELINE:
             return dict(_rate_mode())
         self.load()
+        if self.handover:
+            return {**_rate_mode(), **self._recorded(OBSERVATION_KEYS)}
         if self.kind is PolicyKind.HYBRID:
             modes = {agent.env_kwargs.get("action_mode", "rate") for agent in self.agents}
             if modes != {"rate"}:
                 raise ValueError(f"policy {self.name!r}: a hybrid's residual must be trained "
                                  f"with action_mode='rate', its runs have {sorted(modes)}")
             return dict(_rate_mode())
-        recorded = [{k: agent.env_kwargs[k] for k in ACTION_KEYS if k in agent.env_kwargs}
+        return self._recorded(ACTION_KEYS + OBSERVATION_KEYS)
+
+    def _recorded(self, keys: tuple[str, ...]) -> dict:
+        """The runs' recorded env arguments among ``keys``; they must agree."""
+        recorded = [{k: agent.env_kwargs[k] for k in keys if k in agent.env_kwargs}
                     for agent in self.agents]
         if any(r != recorded[0] for r in recorded):
             raise ValueError(f"policy {self.name!r}: its runs were trained with different "
-                             f"action settings {recorded}")
+                             f"action or observation settings {recorded}")
         return recorded[0]
 
     @property
@@ -174,7 +183,11 @@ def _rate_mode() -> dict:
 
 
 def _nominal_smc(env, scenario: Scenario):
-    """The sliding-mode law designed on ``scenario.nominal`` (None: the env's own model)."""
+    """The sliding-mode law designed on ``scenario.nominal`` (None: the env's own model).
+
+    It never reads e or the masses from the observation (a hybrid's env observes them
+    when its agent does): the law runs on its design model, as ``smc`` does.
+    """
     from .smc import SlidingModeController
 
     nominal = None
@@ -184,7 +197,7 @@ def _nominal_smc(env, scenario: Scenario):
         cfg = env.unwrapped.config
         nominal = TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
                               cfg.gravity, cfg.scales.length_ratio)
-    return SlidingModeController.for_env(env, nominal=nominal)
+    return SlidingModeController.for_env(env, nominal=nominal, use_observed_params=False)
 
 
 def _nominal_filter(env, scenario: Scenario):

@@ -52,6 +52,9 @@ class ObservationLayout:
         l'_cmd at |u| = 1 [-].
     with_params : bool
         Whether e and the mass fractions close the observation.
+    with_eccentricity : bool
+        Whether e closes the observation (implied by ``with_params``; alone with
+        ``observe_params="eccentricity"``).
     action_mode : str
         The env's ``action_mode``: ``"rate"`` (the action is the command u) or
         ``"increment"`` (the action changes u).
@@ -62,13 +65,21 @@ class ObservationLayout:
     max_reel_rate: float
     with_params: bool = False
     action_mode: str = "rate"
+    with_eccentricity: bool = False
 
     @classmethod
     def from_env(cls, env) -> ObservationLayout:
         """The layout of a TetherLibration env (wrapped or not)."""
         cfg = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
-        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, cfg.with_params,
-                   cfg.action_mode)
+        observed = cfg.observed
+        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, observed["masses"],
+                   cfg.action_mode, observed["eccentricity"])
+
+    @property
+    def switches(self) -> dict[str, bool]:
+        """The optional groups of OBSERVATION that are on."""
+        return {"eccentricity": self.with_params or self.with_eccentricity,
+                "masses": self.with_params}
 
     def require_rate_mode(self, who: str) -> None:
         """Raise ValueError unless the env takes reel-rate commands as actions."""
@@ -79,7 +90,7 @@ class ObservationLayout:
     @property
     def obs_dim(self) -> int:
         """Length of one observation (OBSERVATION's size for this n and switch)."""
-        return OBSERVATION.size(self.n_tethers, params=self.with_params)
+        return OBSERVATION.size(self.n_tethers, **self.switches)
 
     def as_batch(self, observation) -> tuple[np.ndarray, bool]:
         """(obs as a float64 (B, obs_dim) batch, whether a single observation was given).
@@ -101,7 +112,7 @@ class ObservationLayout:
         expected = self.obs_dim
         if obs.ndim != 2 or obs.shape[1] != expected:
             raise ValueError(f"observation batch must have shape (B, {expected}), got {obs.shape}")
-        slices = OBSERVATION.slices(self.n_tethers, params=self.with_params)
+        slices = OBSERVATION.slices(self.n_tethers, **self.switches)
         values: dict[str, Any] = {}
         for f in OBSERVATION:
             sl = slices.get(f.name)

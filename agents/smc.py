@@ -101,7 +101,9 @@ class SlidingModeController(ReelRatePolicy):
             f = np.empty_like(st.theta)
             B = np.empty(st.theta.shape + (st.theta.shape[1],))
             for b in range(nu.shape[0]):
-                chain = TetherChain(st.mass_fractions[b], float(st.eccentricity[b]),
+                masses = (self.model.mass_fractions if st.mass_fractions is None
+                          else st.mass_fractions[b])
+                chain = TetherChain(masses, float(st.eccentricity[b]),
                                     self.model.gravity, self.model.length_ratio)
                 f[b], B[b], _ = chain.control_affine(nu[b], st.theta[b], st.dtheta[b],
                                                      st.length[b])

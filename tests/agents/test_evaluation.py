@@ -298,9 +298,33 @@ def test_handover_names_a_hybrid_of_a_trained_agent():
     spec = evaluation.resolve_policy("handover:ppo")
     assert spec.kind is evaluation.PolicyKind.HYBRID and spec.handover
     assert spec.runs == evaluation.resolve_policy("ppo").runs
-    assert spec.env_kwargs == {"action_mode": "rate"}
+    # reel rates, and the observation its agent was trained on
+    assert spec.env_kwargs == {"action_mode": "rate", "observe_params": False}
+    assert evaluation.resolve_policy("ppo").env_kwargs == {
+        "increment_gain": 0.5, "observe_params": False}
     assert "handover:ppo" in evaluation.default_policies()
     with pytest.raises(ValueError, match="acts alone"):
         evaluation.resolve_policy("handover:smc")
     with pytest.raises(ValueError, match="unknown policy"):
         evaluation.resolve_policy("handover:nothing")
+
+
+def test_an_agent_is_evaluated_with_the_observation_it_was_trained_on(tmp_path):
+    """An agent trained seeing e (observe_params="eccentricity") gets e on every
+    scenario, alone and inside its handover hybrid, whose law still designs on its
+    own model."""
+    from tether_gym_agents import training
+
+    run = tmp_path / "seeing_e"
+    assert training.main(["--out", str(run), "--timesteps", "256", "--n-envs", "2",
+                          "--no-progress", "--eval-episodes", "1", "--env-kwargs",
+                          "orbits_per_episode=0.05", "observe_params=eccentricity"]) == 0
+    spec = evaluation.resolve_policy(str(run))
+    assert spec.env_kwargs["observe_params"] == "eccentricity"
+    hybrid = evaluation.resolve_policy("handover:" + str(run))
+    assert hybrid.env_kwargs == {"action_mode": "rate", "observe_params": "eccentricity"}
+    res = evaluation.evaluate([str(run), "handover:" + str(run)], "paper", 1,
+                              out=tmp_path / "o", plots=False, log=None,
+                              env_kwargs=SHORT_KWARGS)
+    for name in (str(run), "handover:" + str(run)):
+        assert res["policies"][name]["n_episodes"] == 1

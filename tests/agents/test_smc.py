@@ -111,3 +111,22 @@ def test_wrong_observation_shape_raises_value_error(shape):
     policy = SlidingModeController.for_env(env)
     with pytest.raises(ValueError, match=r"observation must have shape \(20,\) or \(B, 20\)"):
         policy.predict(np.zeros(shape, dtype=np.float32))
+
+
+def test_observed_eccentricity_alone_is_used_with_the_model_masses():
+    """With observe_params="eccentricity" the law takes e from the observation and the
+    masses from its model: on a fixed e equal to the model's it acts as with no params."""
+    kwargs = {"action_mode": "rate", "eccentricity_range": (0.2, 0.2)}
+    seeing = gym.make("tether_gym/TetherLibration-v1", observe_params="eccentricity", **kwargs)
+    blind = gym.make("tether_gym/TetherLibration-v1", observe_params=False, **kwargs)
+    obs_s, _ = seeing.reset(seed=0)
+    obs_b, _ = blind.reset(seed=0)
+    smc_s = SlidingModeController.for_env(seeing)
+    smc_b = SlidingModeController.for_env(blind)
+    assert smc_s.layout.split(obs_s[None]).mass_fractions is None
+    for _ in range(5):
+        act_s, _ = smc_s.predict(obs_s)
+        act_b, _ = smc_b.predict(obs_b)
+        np.testing.assert_allclose(act_s, act_b, rtol=0, atol=1e-6)
+        obs_s, *_ = seeing.step(act_s)
+        obs_b, *_ = blind.step(act_b)

@@ -109,6 +109,22 @@ def test_obs_dim_formula(n_bodies, randomised, dim):
     assert cfg.obs_dim == dim  # 8(N-1) + 4 (+ N when randomised)
 
 
+@pytest.mark.parametrize(("observe", "dim", "observed"),
+                         [(None, 23, (True, True)), (True, 23, (True, True)),
+                          (False, 20, (False, False)), ("eccentricity", 21, (True, False))])
+def test_observe_params_switches_the_optional_groups(observe, dim, observed):
+    cfg = EnvConfig.from_kwargs(eccentricity_range=(0.0, 0.3), observe_params=observe)
+    assert cfg.obs_dim == dim  # 8(N-1) + 4, + 1 for e, + N-1 for the mass fractions
+    assert (cfg.observed["eccentricity"], cfg.observed["masses"]) == observed
+
+
+@pytest.mark.parametrize(("value", "exc"), [("ecc", ValueError), ("masses", ValueError),
+                                            (1, TypeError), (0.5, TypeError)])
+def test_bad_observe_params_raises_naming_the_value(value, exc):
+    with pytest.raises(exc, match=f"observe_params.*{value!r}"):
+        EnvConfig.from_kwargs(observe_params=value)
+
+
 def test_defaults_for_other_chain_sizes():
     cfg = EnvConfig.from_kwargs(n_bodies=4)
     assert cfg.masses == (1.0, 1.0, 1.0)

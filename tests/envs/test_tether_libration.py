@@ -450,6 +450,24 @@ def test_observation_layout_matches_docstring(make_env, n_bodies):
     assert not np.allclose(ratio, 1.0, atol=1e-3)  # drawn, not nominal
 
 
+def test_observing_the_eccentricity_alone_appends_e_and_changes_nothing_else(make_env):
+    """observe_params="eccentricity": the unobserved observation plus the episode's e."""
+    kwargs = {"eccentricity_range": (0.0, 0.35), "mass_range": 0.25, "init_theta_range": 0.1}
+    blind = make_env(observe_params=False, **kwargs)
+    seeing = make_env(observe_params="eccentricity", **kwargs)
+    assert seeing.observation_space.shape == (blind.observation_space.shape[0] + 1,)
+    obs_b, _ = blind.reset(seed=4)
+    obs_s, info = seeing.reset(seed=4)
+    for step in range(20):
+        np.testing.assert_array_equal(obs_s[:-1], obs_b)
+        assert obs_s[-1] == np.float32(info["eccentricity"])
+        assert 0.0 <= info["eccentricity"] <= 0.35
+        action = np.full(2, 0.3 * math.sin(step), np.float32)
+        obs_b, reward_b, *_ = blind.step(action)
+        obs_s, reward_s, _, _, info = seeing.step(action)
+        assert reward_s == reward_b
+
+
 @pytest.mark.parametrize("kwargs", [{}, {"n_bodies": 4, "init_theta_range": 0.1,
                                          "gravity": "full", "speed_limit": 3.0}])
 def test_env_step_is_the_public_transition(make_env, kwargs):

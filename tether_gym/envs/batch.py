@@ -113,7 +113,8 @@ def step_config(config: EnvConfig) -> StepConfig:
         length_min=lo, length_max=hi,
         accel_ref=float(config.accel_reference),
         accel_scale=float(config.scales.accel),
-        with_params=bool(config.with_params),
+        with_eccentricity=config.observed["eccentricity"],
+        with_masses=config.observed["masses"],
         reward=config.reward_weights.record(),
         length_nominal=np.asarray(config.chain.initial_lengths, dtype=float))
 

@@ -187,8 +187,10 @@ class Randomisation:
         Standard deviation of the observation noise on theta, theta', l, l'.
     disturbance : float
         Bound of the uniform disturbance d on theta'' (paper Eq. 20) [rad/rad^2].
-    observe_params : bool or None
-        Whether e and M_i close the observation; None: exactly when randomised.
+    observe_params : bool, "eccentricity" or None
+        What closes the observation: True e and the mass fractions M_i,
+        ``"eccentricity"`` e alone, False neither; None: e and M_i exactly when
+        randomised.
     """
 
     init_theta_range: float = 0.0
@@ -198,7 +200,7 @@ class Randomisation:
     mass_range: float | None = None
     obs_noise: float = 0.0
     disturbance: float = 0.0
-    observe_params: bool | None = None
+    observe_params: bool | str | None = None
 
     def __post_init__(self) -> None:
         check_range("init_theta_range", self.init_theta_range, 0.0, 0.5 * math.pi)
@@ -210,9 +212,13 @@ class Randomisation:
                            _opt_range("eccentricity_range", self.eccentricity_range, 0.0, 0.99))
         if self.mass_range is not None:
             check_range("mass_range", self.mass_range, 0.0, 1.0, high_open=True)
-        if self.observe_params is not None and not isinstance(self.observe_params, bool):
-            raise TypeError(f"observe_params must be True, False or None, got "
-                            f"{self.observe_params!r}")
+        observe = self.observe_params
+        if isinstance(observe, str) and observe != "eccentricity":
+            raise ValueError(f"observe_params={observe!r}: the only string it takes is "
+                             "'eccentricity' (e alone); else True, False or None")
+        if not (observe is None or isinstance(observe, (bool, str))):
+            raise TypeError(f"observe_params must be True, False, 'eccentricity' or None, got "
+                            f"{observe!r}")
 
     @property
     def randomised(self) -> bool:
@@ -384,19 +390,23 @@ class EnvConfig:
         return self.randomisation.randomised
 
     @property
-    def with_params(self) -> bool:
-        """Whether e and the mass fractions close the observation.
+    def observed(self) -> dict[str, bool]:
+        """The optional observation groups that are on: ``{"eccentricity": .., "masses": ..}``.
 
-        ``observe_params`` if given, else :attr:`randomised`. False with randomisation
-        trains a policy that must be robust to parameters it cannot see.
+        From ``observe_params``: True both, ``"eccentricity"`` e alone, False neither,
+        None both exactly when :attr:`randomised`. Randomisation without them trains a
+        policy that must be robust to parameters it cannot see.
         """
         observe = self.randomisation.observe_params
-        return self.randomised if observe is None else observe
+        if observe is None:
+            observe = self.randomised
+        return {"eccentricity": observe is True or observe == "eccentricity",
+                "masses": observe is True}
 
     @property
     def obs_dim(self) -> int:
         """Length of one observation (OBSERVATION layout)."""
-        return OBSERVATION.size(self.n_tethers, params=self.with_params)
+        return OBSERVATION.size(self.n_tethers, **self.observed)
 
     def param_rows(self, eccentricity, masses) -> np.ndarray:
         """Kernel parameter rows for e of shape (...,) and masses of shape (..., n)."""

@@ -39,11 +39,15 @@ OBSERVATION = Layout("observation", (
     Field("derror", True, "[rad/rad]", "e_i' = theta_i' - theta_d'"),
     Field("log_length", True, "[-]", "ln(l_i / l_i,nom)"),
     Field("command", True, "[-]", "u_i, the normalised reel-rate command in force", -1.0, 1.0),
-    Field("eccentricity", False, "[-]", "eccentricity e", optional="params"),
-    Field("mass_fractions", True, "[-]", "mass fractions M_i", optional="params"),
+    Field("eccentricity", False, "[-]", "eccentricity e", optional="eccentricity"),
+    Field("mass_fractions", True, "[-]", "mass fractions M_i", optional="masses"),
 ))
 O = OBSERVATION.index
 """Offsets of the observation's fields."""
+
+_SWITCH_DOCS = {"eccentricity": "observe_params True or \"eccentricity\"",
+                "masses": "observe_params True"}
+"""What turns each optional observation group on, for the docstring tables."""
 
 _COMPONENT_DOCS = {"reward_tracking": "(1 - W) r_track, the tracking part of the reward",
                    **{f"reward_{name}": "reward penalty (<= 0)" for name in PENALTIES},
@@ -103,11 +107,14 @@ def info_dict(scalars, vectors) -> dict:
     return info
 
 
-def observation_bounds(n: int, with_params: bool) -> tuple[np.ndarray, np.ndarray]:
-    """(low, high) float32 arrays of the observation box for n tethers."""
-    low = np.full(OBSERVATION.size(n, params=with_params), -np.inf, dtype=np.float32)
+def observation_bounds(n: int, switches: dict[str, bool]) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) float32 arrays of the observation box for n tethers.
+
+    ``switches`` turns the optional groups on (``EnvConfig.observed``).
+    """
+    low = np.full(OBSERVATION.size(n, **switches), -np.inf, dtype=np.float32)
     high = -low
-    for name, sl in OBSERVATION.slices(n, params=with_params).items():
+    for name, sl in OBSERVATION.slices(n, **switches).items():
         low[sl] = OBSERVATION[name].low
         high[sl] = OBSERVATION[name].high
     return low, high
@@ -132,6 +139,6 @@ def markdown_table(layout: Layout, title: str = "Field", keyed: bool = False) ->
             index = _offset_text(c0, c1)
             if f.per_tether:
                 index += " .. " + _offset_text(c0 - 1, c1 + 1)
-        note = f" (with {f.optional})" if f.optional else ""
+        note = f" (with {_SWITCH_DOCS.get(f.optional, f.optional)})" if f.optional else ""
         lines.append(f"| {index} | {f.doc}{note} | {f.unit} |")
     return "\n".join(lines)

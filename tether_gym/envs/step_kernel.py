@@ -49,7 +49,8 @@ class StepConfig(NamedTuple):
     length_max: float
     accel_ref: float              # a_ref / (L0 n^2) [-] of the reward's acceleration term
     accel_scale: float            # L0 n^2 [m/s^2] of info["reel_accel"]
-    with_params: bool             # e and M_i close the observation
+    with_eccentricity: bool       # e closes the observation
+    with_masses: bool             # the mass fractions M_i follow it
     reward: RewardParams
     length_nominal: np.ndarray    # (n,) l_i,nom [-] of the length term and observation
 
@@ -138,8 +139,9 @@ def write_outputs(b, rows, cfg, anomaly):
         out[at(O.log_length, n) + j] = math.log(max(out[at(O.length, n) + j], LENGTH_FLOOR)
                                                 / cfg.length_nominal[j])
         out[at(O.command, n) + j] = rows.command[b, j]
-    if cfg.with_params:
+    if cfg.with_eccentricity:
         out[at(O.eccentricity, n)] = ecc
+    if cfg.with_masses:
         for j in range(n):
             out[at(O.mass_fractions, n) + j] = mass_fraction(par, j, n)
     s = rows.info_s

@@ -20,7 +20,7 @@ __all__ = ["TetherLibrationEnv"]
 
 def observation_space(config: EnvConfig) -> spaces.Box:
     """Box of the observation layout (:data:`tether_gym.envs.layout.OBSERVATION`)."""
-    low, high = observation_bounds(config.n_tethers, config.with_params)
+    low, high = observation_bounds(config.n_tethers, config.observed)
     return spaces.Box(low, high, dtype=np.float32)
 
 
@@ -93,8 +93,9 @@ class TetherLibrationEnv(gym.Env):
 
     ## Observation Space
 
-    ``Box(float32)`` of size 8(N-1) + 4, plus N when e and the masses are observed
-    (``observe_params``; by default exactly when they are randomised):
+    ``Box(float32)`` of size 8(N-1) + 4, plus 1 with e observed and N - 1 more with the
+    mass fractions (``observe_params``: True both, ``"eccentricity"`` e alone; by
+    default both exactly when they are randomised):
 
     {observation_table}
 
@@ -186,7 +187,7 @@ class TetherLibrationEnv(gym.Env):
     | disturbance          | 0              | bound of d in theta'' += d (Eq. 20) [rad/rad^2] |
     | eccentricity_range   | None           | (low, high) to draw e per episode               |
     | mass_range           | None           | relative half-width to draw each mass           |
-    | observe_params       | None           | e, M_i in the obs (None: when randomised)       |
+    | observe_params       | None           | True: e, M_i in the obs; "eccentricity": e      |
     | reward_weights       | None           | dict overriding RewardWeights fields            |
     | render_mode          | None           | None, "rgb_array" or "human"                    |
 
@@ -212,7 +213,9 @@ class TetherLibrationEnv(gym.Env):
       penalises the effort of the command u rather than of the action; ``info``
       adds ``command``. Physics, termination, starting states and arguments are
       unchanged, as are the trajectories for the same reel commands. v0 is no
-      longer registered (``gym.make`` of v0 names v1).
+      longer registered (``gym.make`` of v0 names v1). tether_gym 0.4.0 adds
+      ``observe_params="eccentricity"`` (e without the mass fractions); every
+      configuration that existed before returns what it returned.
     * v0: initial release. tether_gym 0.2.0 keeps v0: with every configuration that
       worked before, trajectories, observations, terminations and info entries are
       bitwise those of 0.1.0, except that the reel acceleration is now computed by one
