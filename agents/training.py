@@ -63,6 +63,36 @@ class ConfigError(ValueError):
     """A hyperparameter file, command-line value or env kwarg is invalid."""
 
 
+SCHEDULE_KEYS = ("learning_rate", "clip_range")
+"""Hyperparameters that may be written ``lin_<start>`` (rl-baselines3-zoo's notation)."""
+
+
+def _linear(start: float):
+    """SB3 schedule falling linearly from ``start`` to 0 over the run (progress 1 -> 0)."""
+    def schedule(progress_remaining: float) -> float:
+        return progress_remaining * start
+
+    return schedule
+
+
+def _check_schedule(key: str, value, source: str) -> None:
+    """Raise ConfigError unless a ``lin_<start>`` value has a positive number after ``lin_``."""
+    if isinstance(value, str):
+        try:
+            start = float(value[4:]) if value.startswith("lin_") else math.nan
+        except ValueError:
+            start = math.nan
+        if not start > 0.0 or not math.isfinite(start):
+            raise ConfigError(f"{source}: {key}: {value!r} must be a number or 'lin_<start>' "
+                              "with a start > 0 (falls linearly to 0 over the run)")
+
+
+def with_schedules(params: dict) -> dict:
+    """``params`` with every ``lin_<start>`` value of :data:`SCHEDULE_KEYS` made a schedule."""
+    return {k: (_linear(float(v[4:])) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
+            for k, v in params.items()}
+
+
 def _algo_class(algo: str):
     from stable_baselines3 import PPO, SAC
 
@@ -120,6 +150,9 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
                 raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
     if not isinstance(params.get("env_kwargs") or {}, dict):
         raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
+    for key in SCHEDULE_KEYS:
+        if key in params:
+            _check_schedule(key, params[key], str(path))
     if "residual" in params:
         residual_spec(params["residual"], str(path))
     return params
@@ -750,7 +783,7 @@ def _train(args, argv) -> int:
                                     norm_obs=norm_kwargs.get("norm_obs", True), norm_reward=False,
                                     clip_obs=norm_kwargs.get("clip_obs", 10.0))
         model = algo_cls(run.get("policy", "MlpPolicy"), venv, seed=args.seed, device="cpu",
-                         tensorboard_log=tb_log, verbose=args.verbose, **params)
+                         tensorboard_log=tb_log, verbose=args.verbose, **with_schedules(params))
     resolved_config = {"algo": args.algo, "env_id": args.env_id, "env_kwargs": env_kwargs,
                        "n_envs": n_envs, "seed": args.seed,
                        "hyperparams": {**params, **run, "env_kwargs": env_kwargs,

@@ -95,6 +95,28 @@ def test_nonuniform_config_list_error_names_the_line(tmp_path, capsys):
     assert f"{cfg}: env_kwargs masses" in capsys.readouterr().err
 
 
+def test_linear_schedules_in_zoo_notation(tmp_path, capsys):
+    """``learning_rate: lin_3e-4`` falls from 3e-4 to 0 over the run; bad ones stop it."""
+    schedule = training.with_schedules({"learning_rate": "lin_3e-4", "gamma": 0.9})
+    assert schedule["gamma"] == 0.9
+    assert [schedule["learning_rate"](p) for p in (1.0, 0.5, 0.0)] == [3e-4, 1.5e-4, 0.0]
+    cfg = tmp_path / "c.yml"
+    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
+        "learning_rate": "lin_1e-3", "clip_range": "lin_0.2", "n_steps": 32,
+        "batch_size": 32}}))
+    out = tmp_path / "o"
+    assert main(["--config", str(cfg), "--out", str(out), "--timesteps", "64", *FAST,
+                 *SHORT]) == 0
+    saved = yaml.safe_load((out / "config.yml").read_text())["hyperparams"]
+    assert saved["learning_rate"] == "lin_1e-3"  # recorded as written
+    for bad in ("lin_0", "lin_x", "const_1e-3"):
+        cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {"learning_rate": bad}}))
+        assert main(["--config", str(cfg), "--out", str(tmp_path / "b"), "--timesteps",
+                     "8"]) == 2
+        assert f"learning_rate: {bad!r} must be a number or 'lin_<start>'" in \
+            capsys.readouterr().err
+
+
 @pytest.mark.parametrize("argv, expected", [
     (["--n-envs", "0"], "--n-envs 0: must be an integer >= 1"),
     (["--eval-freq", "-1"], "--eval-freq -1: must be an integer >= 1"),
