@@ -7,5 +7,5 @@ HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE.parent))
 from variant_table import print_table  # noqa: E402
 
-print_table(HERE, {"three": "3M steps (shipped `ppo`, seeds 0-5)",
+print_table(HERE, {"three": "3M steps (the ten runs of the fan-out)",
                    "six": "6M steps (the same runs continued)"}, first="budget")
