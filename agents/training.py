@@ -75,13 +75,18 @@ def _linear(start: float):
     return schedule
 
 
+def _lin_start(value: str) -> float:
+    """The start of a ``lin_<start>`` value; NaN when it is not one."""
+    try:
+        return float(value[4:]) if value.startswith("lin_") else math.nan
+    except ValueError:
+        return math.nan
+
+
 def _check_schedule(key: str, value, source: str) -> None:
     """Raise ConfigError unless a ``lin_<start>`` value has a positive number after ``lin_``."""
     if isinstance(value, str):
-        try:
-            start = float(value[4:]) if value.startswith("lin_") else math.nan
-        except ValueError:
-            start = math.nan
+        start = _lin_start(value)
         if not start > 0.0 or not math.isfinite(start):
             raise ConfigError(f"{source}: {key}: {value!r} must be a number or 'lin_<start>' "
                               "with a start > 0 (falls linearly to 0 over the run)")
@@ -89,7 +94,7 @@ def _check_schedule(key: str, value, source: str) -> None:
 
 def with_schedules(params: dict) -> dict:
     """``params`` with every ``lin_<start>`` value of :data:`SCHEDULE_KEYS` made a schedule."""
-    return {k: (_linear(float(v[4:])) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
+    return {k: (_linear(_lin_start(v)) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
             for k, v in params.items()}
 
 

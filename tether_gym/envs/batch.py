@@ -103,6 +103,7 @@ def check_options(options, config: EnvConfig) -> dict:
 def step_config(config: EnvConfig) -> StepConfig:
     """The compiled step's constants for a configuration."""
     lo, hi = config.episode.length_bounds
+    observed = config.observed
     return StepConfig(
         max_reel_rate=float(config.reels.max_rate),
         incremental=config.action.mode == "increment",
@@ -113,8 +114,8 @@ def step_config(config: EnvConfig) -> StepConfig:
         length_min=lo, length_max=hi,
         accel_ref=float(config.accel_reference),
         accel_scale=float(config.scales.accel),
-        with_eccentricity=config.observed["eccentricity"],
-        with_masses=config.observed["masses"],
+        with_eccentricity=observed["eccentricity"],
+        with_masses=observed["masses"],
         reward=config.reward_weights.record(),
         length_nominal=np.asarray(config.chain.initial_lengths, dtype=float))
 

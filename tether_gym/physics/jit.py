@@ -15,11 +15,11 @@ it touches (the scratch comes from :func:`tether_gym.physics.kernels.make_scratc
 ``INLINE``: ``KERNEL`` inlined into the caller at numba IR level (the small hot
 helpers); an inlined function runs under its caller's options.
 
-``SCALAR``: ``LOOP`` for helpers of integers and floats only (no arrays in or out, also
-when called from Python), left to LLVM to inline:
-numba's IR-level inlining deep-copies the callee at every call site, which for the
-offset helper :func:`~tether_gym.physics.layout.at`, called at hundreds of sites,
-cost compile time and bought nothing at run time.
+The offset helper :func:`~tether_gym.physics.layout.at`, called at hundreds of sites,
+is compiled with ``LOOP`` and left to LLVM to inline: numba's IR-level inlining
+deep-copies the callee at every call site, which cost compile time and bought nothing
+at run time. (Helpers that Python also calls with arrays cannot do this: a function
+compiled without NRT cannot return arrays.)
 
 Importing this module installs :mod:`tether_gym.physics.compile_cache`, before any
 kernel is decorated: every ``cache=True`` function of the package is then cached under
@@ -34,7 +34,7 @@ from typing import Any
 
 from . import compile_cache
 
-__all__ = ["KERNEL", "LOOP", "INLINE", "SCALAR", "CACHE"]
+__all__ = ["KERNEL", "LOOP", "INLINE", "CACHE"]
 
 CACHE = compile_cache.install()
 """Where and under which key the kernels are cached (:class:`~.compile_cache.CacheState`)."""
@@ -42,4 +42,3 @@ CACHE = compile_cache.install()
 KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy"}
 LOOP: dict[str, Any] = {**KERNEL, "_nrt": False}
 INLINE: dict[str, Any] = {**KERNEL, "inline": "always"}
-SCALAR: dict[str, Any] = {**KERNEL, "_nrt": False}

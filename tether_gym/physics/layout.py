@@ -20,7 +20,7 @@ from typing import Any
 
 from numba import njit
 
-from .jit import SCALAR
+from .jit import LOOP
 
 __all__ = ["Field", "Layout", "at"]
 
@@ -129,7 +129,7 @@ class Layout:
         return f"Layout({self.name!r}, {list(self.names)})"
 
 
-@njit(**SCALAR)
+@njit(**LOOP)
 def at(spec, n):
     """Offset ``c0 + c1 n`` of a field whose :attr:`Layout.index` entry is ``spec``.
 
