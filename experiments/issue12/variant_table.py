@@ -2,7 +2,8 @@
 
 A probe folder keeps results_<variant>.json (default suite, ``python evaluate.py RUNS
 --out ...``) and beyond_<variant>.json (``--suite beyond``); its table.py calls
-:func:`print_table` with the variants' labels.
+:func:`print_table` with the variants' labels. A variant may name another probe's files
+by a relative path (``../observe_e/blind``).
 """
 
 import json
@@ -22,14 +23,15 @@ def print_table(folder: Path, variants: dict, first: str = "variant") -> None:
           "| reel excursion | reel effort | failed | beyond: success | beyond: failed |")
     print("|---|---|---|---|---|---|---|---|---|---|---|")
     for name, label in variants.items():
-        path = folder / f"results_{name}.json"
+        stem = folder / name
+        path = stem.parent / f"results_{stem.name}.json"
         if not path.exists():
             continue
         res = json.loads(path.read_text())
         (pol, block), = res["policies"].items()
         per = res["per_scenario"]
         fails = sum(block["failures"].values())
-        beyond = folder / f"beyond_{name}.json"
+        beyond = stem.parent / f"beyond_{stem.name}.json"
         bcells = "n/a | n/a"
         if beyond.exists():
             (bb,) = json.loads(beyond.read_text())["policies"].values()

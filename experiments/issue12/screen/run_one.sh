@@ -1,19 +1,19 @@
 #!/bin/bash
 # One 1M-step PPO run of the precision screen: variant (g1 | lin), seed.
-# configs/ppo.yml otherwise; the baseline (increment gain 0.5) is /work/runs/gain/g0.5.
+# configs/ppo.yml otherwise; the baseline (increment gain 0.5) is runs/gain/g0.5.
 v=$1; s=$2
 here=$(cd "$(dirname "$0")" && pwd)
-cd /work/main && source .venv/bin/activate
+cd "$(dirname "$0")/../../.." && source .venv/bin/activate   # the repository root
 export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 case $v in
   g1) extra=(--env-kwargs increment_gain=1.0) ;;        # increment gain 1.0 instead of 0.5
   lin) extra=(--config "$here/ppo_lin.yml") ;;          # learning rate 3e-4 falling linearly to 0
   *) echo "unknown variant $v"; exit 2 ;;
 esac
-out=/work/runs/screen/$v/seed_$s
+out=runs/screen/$v/seed_$s
 mkdir -p "$(dirname "$out")"
 start=$(date +%s)
 python train.py --algo ppo --seed "$s" --timesteps 1000000 "${extra[@]}" --out "$out" --no-progress \
-  > "/work/runs/screen/${v}_s${s}.log" 2>&1
+  > "runs/screen/${v}_s${s}.log" 2>&1
 rc=$?
 echo "$(date -u +%T) done v=$v s=$s rc=$rc wall=$(( $(date +%s) - start ))s"
