@@ -347,9 +347,29 @@ def test_the_lead_moves_towards_workers_that_end_just_before_the_caller():
     batch._adjust_lead(late=20e-6, per_row=1e-6, most=100)  # worker 20 rows late
     assert batch._lead == pytest.approx(10.0 + 0.5 * (20 + LEAD_MARGIN))
     batch._adjust_lead(late=-1.0, per_row=1e-6, most=100)
-    assert batch._lead == 0.0
+    assert batch._lead == -100.0  # workers far early: they get up to half more rows
     batch._adjust_lead(late=1.0, per_row=1e-6, most=100)
     assert batch._lead == 100.0
+
+
+def test_autoresets_run_beside_the_threaded_step_with_the_serial_results():
+    """The ended rows are reset while the workers step the others (``meanwhile``); with a
+    negative lead (workers given more rows) the results stay bitwise the serial ones."""
+    kwargs = dict(FAILING, disturbance=0.1, obs_noise=0.01)
+    serial = TetherLibrationVectorEnv(37, parallel=False, **kwargs)
+    threaded = TetherLibrationVectorEnv(37, parallel=True, **kwargs)
+    threaded._batch._adjust_lead = lambda *args: None
+    threaded._batch._lead = -15.0
+    calls = []
+    reset_rows = threaded._batch.reset_rows
+    threaded._batch.reset_rows = lambda *a, **k: calls.append(len(a[0])) or reset_rows(*a, **k)
+    acts = actions_for("failing", 37, 1, 25)
+    serial.reset(seed=4)
+    threaded.reset(seed=4)
+    calls.clear()
+    for t in range(25):
+        assert_identical(serial.step(acts[t]), threaded.step(acts[t]), f"step {t}")
+    assert sum(calls) > 0  # some rows ended and were reset during threaded steps
 
 
 def test_render_rgb_array_gives_one_frame_per_env():

@@ -9,15 +9,15 @@ the observation noise.
 :meth:`ChainBatch.step` can advance a subset of the rows (the vector env leaves the
 rows it is about to auto-reset alone) and can spread the rows over numba's threads;
 every row runs the same compiled code either way, so the results do not change.
-Threads are Python threads running the compiled step (which releases the GIL) on
-contiguous chunks of rows, each with its own scratch.
+Threads are Python threads that run the compiled step on contiguous chunks of rows
+without the GIL, each with its own scratch (:mod:`.workers`).
 """
 
 from __future__ import annotations
 
-import functools
 import time
 import weakref
+from collections.abc import Callable
 from typing import NamedTuple
 
 import numpy as np
@@ -35,7 +35,7 @@ from ..tasks.reward import COMPONENTS
 from .config import EnvConfig
 from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
 from .step_kernel import Rows, StepConfig, new_row_work, step_rows
-from .workers import ChunkWorker
+from .workers import SLOTS, Relay, SpinWorker, yield_function
 
 __all__ = ["ChainBatch", "RESET_OPTION_KEYS", "check_options"]
 
@@ -48,6 +48,9 @@ OPTION_BOUNDS = {"nu": 1.0e4, "dtheta": 10.0, "dlength": 10.0}
 
 LEAD_MARGIN = 2.0
 """Rows by which a threaded step's workers should end before the calling thread [-]."""
+
+GIVE_UP, CAN_THREAD = yield_function()
+"""The workers' yield function, and whether it is a real one (else every step is serial)."""
 
 MAX_RESET_DRAWS = 100
 """Draws per row before a configuration whose initial states all fail is rejected."""
@@ -120,7 +123,7 @@ def step_config(config: EnvConfig) -> StepConfig:
         length_nominal=np.asarray(config.chain.initial_lengths, dtype=float))
 
 
-def _stop_workers(workers: list[ChunkWorker]) -> None:
+def _stop_workers(workers: list[SpinWorker]) -> None:
     """Stop and forget the worker threads of a batch (also when it is garbage collected)."""
     while workers:
         workers.pop().stop()
@@ -154,8 +157,6 @@ class StartPlan(NamedTuple):
     dref: float
     eq10: tuple | None  # (num, den) of Eq. 10 at nu0 and the fixed e; None when e is drawn
     episode_length: float
-    length_bounds: tuple
-    slices: dict
 
     @classmethod
     def of(cls, config: EnvConfig) -> StartPlan:
@@ -175,8 +176,7 @@ class StartPlan(NamedTuple):
                    config.randomised, rnd.eccentricity_range, rnd.mass_range, rnd.obs_noise,
                    rnd.init_theta_range, rnd.init_dtheta_range, rnd.init_length_range,
                    np.asarray(config.initial_theta), np.asarray(config.initial_lengths),
-                   amplitude, frequency, nu0, ref, dref, eq10, config.episode_length,
-                   config.episode.length_bounds, STATE.slices(config.n_tethers))
+                   amplitude, frequency, nu0, ref, dref, eq10, config.episode_length)
 
 
 class ChainBatch:
@@ -200,7 +200,8 @@ class ChainBatch:
             derivative=np.zeros((num, m)),
             info_s=np.zeros((N_INFO_SCALARS, num)), info_v=np.zeros((N_INFO_VECTORS, num, n)),
             steps=np.zeros(num, dtype=np.int64), nu_end=np.zeros(num),
-            truncated=np.zeros(num, dtype=np.bool_), command=np.zeros((num, n)))
+            truncated=np.zeros(num, dtype=np.bool_), command=np.zeros((num, n)),
+            start_failed=np.zeros(num, dtype=np.bool_))
         self.cfg = step_config(config)
         self._plan = StartPlan.of(config)
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0
@@ -213,10 +214,13 @@ class ChainBatch:
         self._all_rows = np.arange(num, dtype=np.int64)
         self._no_action = np.zeros((num, n))
         self._step = Direct(step_rows)
+        self._once = Relay(np.zeros(SLOTS, dtype=np.int64), GIVE_UP, 0)  # not a worker
         self._work = [new_row_work(n)]  # one scratch per thread
-        self._workers: list[ChunkWorker] = []  # started by the first threaded step
+        self._workers: list[SpinWorker] = []  # started by the first threaded step
         self._lead = 0.0  # extra rows of this thread's chunk in a threaded step
-        self._chunk_ends = [0.0]  # when each worker's chunk of the last threaded step ended
+        # a threaded step's rows and actions, where the workers read them
+        self._index_buf = np.zeros(num, dtype=np.int64)
+        self._action_buf = np.zeros((num, n))
         self._finalizer = weakref.finalize(self, _stop_workers, self._workers)
 
     # views kept for readability (the arrays live in self.rows)
@@ -271,7 +275,7 @@ class ChainBatch:
         rows = np.asarray(rows, dtype=np.int64)
         for _ in range(MAX_RESET_DRAWS):
             self._draw_rows(rows, rngs, opts)
-            failed = rows[self._failed_at_start(rows)]
+            failed = rows[self.rows.start_failed[rows]]
             if failed.size == 0:
                 return
             if set(opts) & set(STATE.names):
@@ -284,19 +288,6 @@ class ChainBatch:
                          f"{self._start_failure(int(rows[0]))}; narrow the init_*_range "
                          "arguments or move initial_theta / initial_lengths away from the "
                          "failure bounds")
-
-    def _failed_at_start(self, rows: np.ndarray) -> np.ndarray:
-        """Mask of the listed rows whose initial state is non-finite or failed."""
-        r = self.rows
-        sl = self._plan.slices
-        y = r.y[rows]
-        lo, hi = self._plan.length_bounds
-        length = y[:, sl["length"]]
-        tension = r.tension[rows]
-        return (~np.isfinite(y).all(axis=1) | ~np.isfinite(tension).all(axis=1)
-                | (tension <= 0.0).any(axis=1)
-                | (np.abs(y[:, sl["theta"]]) >= 0.5 * np.pi).any(axis=1)
-                | ((length < lo) | (length > hi)).any(axis=1))
 
     def _start_failure(self, b: int) -> str:
         """Why row b's initial state fails, in words."""
@@ -361,20 +352,23 @@ class ChainBatch:
         r.nu_end[rows] = nu0 + plan.episode_length
         fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
         r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
-        r.failure[rows] = 0
-        r.reward[rows] = 0.0
-        r.components[rows] = 0.0
-        self._step(rows, self._no_action, r, self.cfg, self._work[0], True)
+        self._step(rows, self._no_action, r, self.cfg, self._work[0], True, self._once)
 
     # ------------------------------------------------------------------ #
     def step(self, action: np.ndarray, rngs, rows: np.ndarray | None = None,
-             n_chunks: int = 0) -> None:
+             n_chunks: int = 0, *, checked: bool = False,
+             meanwhile: Callable[[], object] | None = None) -> None:
         """One control step of every row, or of the rows listed in ``rows``.
 
         ``action`` is a C-contiguous float64 (num, n) array; ``rngs[b]`` draws row b's
         disturbance and noise. ``rows`` (int64 indices) leaves the other rows
         untouched (no physics, no random draws). ``n_chunks`` > 1 splits the rows into
         that many contiguous chunks run on threads (bitwise the same results).
+        ``checked`` says the caller has checked that every action is finite.
+        ``meanwhile`` is called on this thread, while the worker threads step their
+        chunks (after the step when it is not threaded): work on other rows, such as the
+        vector env's autoresets, that then costs no time of its own. It must not touch
+        the stepped rows or their generators.
 
         Raises
         ------
@@ -382,73 +376,86 @@ class ChainBatch:
             If a stepped row's action is NaN or inf; then nothing has changed.
         """
         index = self._all_rows if rows is None else rows
-        if n_chunks > 1 and len(index) > 1:
-            bad = self._check_finite(action, index)
+        threaded = n_chunks > 1 and len(index) > 1 and CAN_THREAD
+        bad = -1
+        if self._random_step or threaded:
+            if not checked:
+                bad = self._check_finite(action, index)
+                if bad >= 0:
+                    self._raise_not_finite(action, bad)
             if self._random_step:
                 self._draw_step_noise(rngs, rows)
-            self._step_threaded(action, index, min(n_chunks, len(index)))
-        elif self._random_step:
-            bad = self._check_finite(action, index)
-            self._draw_step_noise(rngs, rows)
-            self._step(index, action, self.rows, self.cfg, self._work[0], False)
-        else:  # the kernel checks the actions before it steps any row
-            bad = self._step(index, action, self.rows, self.cfg, self._work[0], False)
+        if threaded:
+            self._step_threaded(action, index, min(n_chunks, len(index)), meanwhile)
+            return
+        # the kernel checks the actions before it steps any row
+        bad = self._step(index, action, self.rows, self.cfg, self._work[0], False, self._once)
         if bad >= 0:
-            raise ValueError(f"actions must be finite (no NaN or inf); row {bad} is not: "
-                             f"{action[bad]!r}")
+            self._raise_not_finite(action, bad)
+        if meanwhile is not None:
+            meanwhile()
+
+    @staticmethod
+    def _raise_not_finite(action: np.ndarray, bad: int) -> None:
+        raise ValueError(f"actions must be finite (no NaN or inf); row {bad} is not: "
+                         f"{action[bad]!r}")
 
     def _check_finite(self, action: np.ndarray, index: np.ndarray) -> int:
         """-1 if the listed rows' actions are finite, else the first bad row."""
         ok = np.isfinite(action[index]).all(axis=1)
         return -1 if ok.all() else int(index[np.argmin(ok)])
 
-    def _step_threaded(self, action: np.ndarray, rows: np.ndarray, n_chunks: int) -> None:
-        """Chunks 1.. on the worker threads, chunk 0 on this one; wait for all.
+    def _step_threaded(self, action: np.ndarray, rows: np.ndarray, n_chunks: int,
+                       meanwhile: Callable[[], object] | None) -> None:
+        """Chunks 1.. on the worker threads, then ``meanwhile()`` and chunk 0 on this one.
 
-        This thread's chunk is longer than the workers' by ``self._lead`` rows: a worker
-        starts some tens of microseconds after it is woken, and this thread would then
-        sleep until the last worker is done and be woken in turn. The lead is adjusted
-        after every step so that the workers finish just before this thread does
-        (:meth:`_adjust_lead`); which thread steps a row does not change its result.
+        This thread's chunk is longer than the workers' by ``self._lead`` rows (shorter
+        when negative: ``meanwhile`` took time), adjusted after every step
+        (:meth:`_adjust_lead`) so that the workers finish just before this thread does;
+        which thread steps a row does not change its result.
         """
         while len(self._work) < n_chunks:
             self._work.append(new_row_work(self.n))
         while len(self._workers) < n_chunks - 1:
-            self._workers.append(ChunkWorker())
-            self._chunk_ends.append(0.0)
+            work = self._work[len(self._workers) + 1]
+            self._workers.append(SpinWorker(
+                self._step, (self._index_buf, self._action_buf, self.rows, self.cfg, work,
+                             False), GIVE_UP))
         count = len(rows)
-        lead = min(int(self._lead), count // n_chunks)
+        self._index_buf[:count] = rows
+        self._action_buf[...] = action
+        most = count // n_chunks
+        lead = min(max(int(self._lead), -most), most)
         share = (count - lead) / n_chunks
         bounds = [0] + [lead + round(c * share) for c in range(1, n_chunks)] + [count]
-        ends = self._chunk_ends
-        for c in range(1, n_chunks):
-            self._workers[c - 1].start(functools.partial(
-                self._timed_chunk, c, rows[bounds[c]:bounds[c + 1]], action))
-        start = time.perf_counter()
+        jobs = [self._workers[c - 1].start(bounds[c], bounds[c + 1])
+                for c in range(1, n_chunks)]
         try:
-            self._step(rows[:bounds[1]], action, self.rows, self.cfg, self._work[0], False)
-        finally:
+            if meanwhile is not None:
+                meanwhile()
+            start = time.perf_counter()
+            self._step(self._index_buf[:bounds[1]], self._action_buf, self.rows, self.cfg,
+                       self._work[0], False, self._once)
             end = time.perf_counter()
-            for c in range(1, n_chunks):
-                self._workers[c - 1].wait()
-        self._adjust_lead(max(ends[1:n_chunks]) - end, (end - start) / max(bounds[1], 1),
-                          count // n_chunks)
-
-    def _timed_chunk(self, c: int, rows: np.ndarray, action: np.ndarray) -> None:
-        """Worker c's part of a threaded step; records when it ended."""
-        self._step(rows, action, self.rows, self.cfg, self._work[c], False)
-        self._chunk_ends[c] = time.perf_counter()
+        finally:  # never return (or raise) while a worker is still writing the rows
+            polls = sum(self._workers[c - 1].wait(jobs[c - 1]) for c in range(1, n_chunks))
+        waited = time.perf_counter() - end
+        per_row = (end - start) / max(bounds[1], 1)
+        # a worker that was done when this thread looked may have been so by any margin:
+        # then the lead shrinks by half a row (LEAD_MARGIN + 1 rows early, as it were)
+        late = waited if polls else -(LEAD_MARGIN + 1.0) * per_row
+        self._adjust_lead(late, per_row, most)
 
     def _adjust_lead(self, late: float, per_row: float, most: int) -> None:
         """Move the lead towards workers that end ``LEAD_MARGIN`` rows before this thread.
 
         ``late`` [s] is how much later than this thread the last worker ended (negative:
         earlier), ``per_row`` [s] this thread's time per row; half the error is corrected
-        per step (a damped loop: single steps jitter), within [0, ``most``] rows.
+        per step (a damped loop: single steps jitter), within [-``most``, ``most``] rows.
         """
         if per_row > 0.0:
             error = late / per_row + LEAD_MARGIN
-            self._lead = min(max(self._lead + 0.5 * error, 0.0), float(most))
+            self._lead = min(max(self._lead + 0.5 * error, -float(most)), float(most))
 
     def close(self) -> None:
         """Stop the worker threads (if any were started)."""

@@ -27,8 +27,9 @@ from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
 from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
-from ..tasks.termination import KEEP_PREVIOUS, failure_code
+from ..tasks.termination import KEEP_PREVIOUS, failure_code, start_failed
 from .layout import I, O
+from .workers import DONE, HI, LO, next_job
 
 __all__ = ["StepConfig", "Rows", "RowWork", "make_row_work", "step_rows"]
 
@@ -76,6 +77,7 @@ class Rows(NamedTuple):
     nu_end: np.ndarray       # (B,) true anomaly at which the episode is truncated [rad]
     truncated: np.ndarray    # (B,) bool: nu has reached nu_end
     command: np.ndarray      # (B, n) normalised reel-rate command u in [-1, 1] [-]
+    start_failed: np.ndarray  # (B,) bool: the row's last reset drew an unusable start
 
 
 class RowWork(NamedTuple):
@@ -101,10 +103,15 @@ def new_row_work(n: int) -> RowWork:
 
 
 @njit(**INLINE)
-def anomaly_terms(nu, cfg):
-    """(sin nu, cos nu, theta_d, theta_d') at true anomaly nu, computed once per row and step."""
+def anomaly_terms(nu, cfg, orbit):
+    """(sin nu, cos nu, theta_d, theta_d') at true anomaly nu, computed once per row and step.
+
+    ``orbit`` is the thread's :func:`~tether_gym.physics.kernels.sin_cos_nu` cache: the
+    step's last right-hand side was evaluated at this nu.
+    """
     ref, dref, _ = desired_libration_jit(nu, cfg.amplitude, cfg.frequency)
-    return math.sin(nu), math.cos(nu), ref, dref
+    sn, cn = kernels.sin_cos_nu(nu, orbit)
+    return sn, cn, ref, dref
 
 
 @njit(**INLINE)
@@ -205,62 +212,101 @@ def _task(b, cfg, work, rows, anomaly):
     rows.reward[b] = reward_terms(y, n, ref, dref, cfg.reward, work.terms, rows.components[b])
 
 
+@njit(**INLINE)
+def first_bad_action(index, lo, hi, action, n):
+    """The first of the rows ``index[lo:hi]`` whose action is NaN or inf, or -1."""
+    for i in range(lo, hi):
+        for j in range(n):
+            if not math.isfinite(action[index[i], j]):
+                return index[i]
+    return -1
+
+
 @njit(nogil=True, **LOOP)
-def step_rows(index, action, rows, cfg, work, reset):
+def step_rows(index, action, rows, cfg, work, reset, relay):
     """One control step of the rows listed in ``index`` (int64), in place; others untouched.
 
     ``action`` (B, n) holds the actions, clipped to [-1, 1]; they set the normalised
     command u (``rows.command``): u = action, or u <- clip(u + gain * action, -1, 1)
     with ``cfg.incremental``; l'_cmd = u * max_reel_rate. Returns -1, or, before
     anything is stepped, the first listed row whose action is NaN or inf (then no row
-    is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``, ``noise`` and
-    ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at their
-    initial state with the reels holding their rate (the state the first step starts
-    from), their observation and info entries, zero steps and the command u = clip(l' /
-    max_reel_rate, -1, 1) (the reels' rate); their reward components must be zero.
+    is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``,
+    ``noise`` and ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at
+    their initial state with the reels holding their rate (the state the first step
+    starts from), their observation and info entries, zero steps, failure code, reward
+    and reward components, the command u = clip(l' / max_reel_rate, -1, 1) (the reels'
+    rate), and ``start_failed`` (:func:`~tether_gym.tasks.termination.start_failed`:
+    the start is already failed, the caller draws again).
 
     A row whose state turns non-finite keeps its previous state (so nothing
     non-finite reaches the observation) and gets failure code 1 and reward 0.
+
+    ``relay`` (:class:`~tether_gym.envs.workers.Relay`): with ``polls`` 0 (every call
+    but a worker thread's) the listed rows are stepped once. With ``polls`` > 0 the call
+    serves the worker thread of ``relay.ctl`` instead (:mod:`.workers`): it steps
+    ``index[LO:HI]`` of each job posted there, sets ``DONE`` after each, and returns -1
+    when no job came for ``polls`` polls or ``STOP`` is set. Serving lives here, around
+    the one copy of the row code, so that the step is compiled once.
     """
     m = rows.y.shape[1]
     n = m // 4
-    if not reset:
-        for i in range(index.shape[0]):
-            for j in range(n):
-                if not math.isfinite(action[index[i], j]):
-                    return index[i]
     no_steps = kernels.Substeps(cfg.substeps.h, 0)
     shared = rows.par.shape[0] == 1
-    for i in range(index.shape[0]):
-        b = index[i]
-        yb = rows.y[b]
-        pb = rows.par[0] if shared else rows.par[b]
-        out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
-        if reset:  # evaluate only: the reels hold their rate, no disturbance
-            for j in range(n):
-                work.command[j] = yb[at(S.dlength, n) + j]
-                rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0), 1.0)
-            inputs = kernels.StepInputs(work.command, work.zero)
-            substeps = no_steps
-        else:
-            for k in range(m):
-                work.previous[k] = yb[k]
-            for j in range(n):
-                a = min(max(action[b, j], -1.0), 1.0)
-                if cfg.incremental:
-                    a = min(max(rows.command[b, j] + cfg.increment_gain * a, -1.0), 1.0)
-                rows.command[b, j] = a
-                work.command[j] = a * cfg.max_reel_rate
-            inputs = kernels.StepInputs(work.command, rows.disturbance[b])
-            substeps = cfg.substeps
-        rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps, work.physics,
-                                         out)
-        anomaly = anomaly_terms(rows.nu[b], cfg)
-        if reset:
-            rows.steps[b] = 0
-        else:
-            rows.steps[b] += 1
-            _task(b, cfg, work, rows, anomaly)
-        rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
-        write_outputs(b, rows, cfg, anomaly)
-    return -1
+    ctl = relay.ctl
+    serving = relay.polls > 0
+    seen = ctl[DONE]
+    lo = 0
+    hi = index.shape[0]
+    while True:
+        job = seen
+        if serving:
+            job = next_job(relay, seen)
+            if job < 0:
+                return -1
+            lo = ctl[LO]
+            hi = ctl[HI]
+        bad = -1 if reset else first_bad_action(index, lo, hi, action, n)
+        for i in range(lo, hi if bad < 0 else lo):
+            b = index[i]
+            yb = rows.y[b]
+            pb = rows.par[0] if shared else rows.par[b]
+            out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
+            if reset:  # evaluate only: the reels hold their rate, no disturbance
+                rows.failure[b] = 0
+                rows.reward[b] = 0.0
+                for c in range(rows.components.shape[1]):
+                    rows.components[b, c] = 0.0
+                for j in range(n):
+                    work.command[j] = yb[at(S.dlength, n) + j]
+                    rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0),
+                                             1.0)
+                inputs = kernels.StepInputs(work.command, work.zero)
+                substeps = no_steps
+            else:
+                for k in range(m):
+                    work.previous[k] = yb[k]
+                for j in range(n):
+                    a = min(max(action[b, j], -1.0), 1.0)
+                    if cfg.incremental:
+                        a = min(max(rows.command[b, j] + cfg.increment_gain * a, -1.0), 1.0)
+                    rows.command[b, j] = a
+                    work.command[j] = a * cfg.max_reel_rate
+                inputs = kernels.StepInputs(work.command, rows.disturbance[b])
+                substeps = cfg.substeps
+            rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps,
+                                             work.physics, out)
+            anomaly = anomaly_terms(rows.nu[b], cfg, work.physics.orbit)
+            if reset:
+                rows.steps[b] = 0
+                rows.start_failed[b] = start_failed(yb, rows.tension[b], cfg.length_min,
+                                                    cfg.length_max)
+            else:
+                rows.steps[b] += 1
+                _task(b, cfg, work, rows, anomaly)
+            rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
+            write_outputs(b, rows, cfg, anomaly)
+        if not serving:
+            return bad
+        relay.give_up()  # a compiler barrier: the rows are written before DONE
+        ctl[DONE] = job
+        seen = job

@@ -245,16 +245,22 @@ class TetherLibrationVectorEnv(VectorEnv):
         done = self._autoreset
         if done.any():
             rows = np.flatnonzero(~done)
+            ended = np.flatnonzero(done)
             if len(rows):
+                # the ended rows are reset while the worker threads step the others (or
+                # after the step): disjoint rows, each with its own generator
                 chunks = self._n_chunks(len(rows))
                 start = time.perf_counter()
-                batch.step(a, self._rngs, rows, chunks)
+                batch.step(a, self._rngs, rows, chunks, checked=True,
+                           meanwhile=lambda: batch.reset_rows(ended, self._rngs))
                 self._threads.record(len(rows), time.perf_counter() - start)
-            batch.reset_rows(np.flatnonzero(done), self._rngs)
+            else:
+                batch.reset_rows(ended, self._rngs)
         else:
             chunks = self._n_chunks(self.num_envs)
             start = time.perf_counter()
-            batch.step(a, self._rngs, None if chunks == 0 else self._all_rows, chunks)
+            batch.step(a, self._rngs, None if chunks == 0 else self._all_rows, chunks,
+                       checked=True)
             self._threads.record(self.num_envs, time.perf_counter() - start)
         # reset rows have failure 0, steps 0 and nu < nu_end: neither flag is set for them
         terminated = batch.failure != 0

@@ -1,58 +1,186 @@
 """Worker threads for the threaded step: one per extra chunk of rows.
 
-Work is handed over by semaphores (a wake-up costs a few microseconds, a thread pool's
-futures several tens).
+A worker hands its chunk to the compiled step without the GIL and without a wake-up:
+the worker thread sits in the compiled step itself (:func:`~.step_kernel.step_rows`
+called with a serving :class:`Relay`), which polls for the next chunk for about a
+millisecond after each one, yielding the core between polls (``sched_yield``), and only
+then returns to Python to block on a semaphore. The calling thread waits for the chunks
+in compiled code too (:func:`wait_done`). Waking a blocked thread cost 22-47 us on this
+project's 2-core virtual machine (the woken core had halted), about a fifth of a
+256-env step, and the woken thread then had to take the GIL from a caller that was still
+in Python; a polling worker starts its chunk within a microsecond (bench/README.md).
+Serving runs in the one compiled step (rather than in a function that calls it) so
+that the step is compiled once: a second compiled caller recompiles the whole step
+into itself, 8 s of a first threaded step with an empty cache.
 
-The compiled step releases the GIL, so a worker runs its chunk while the calling thread
-runs another; nothing spins while idle (see :mod:`tether_gym.envs.threads` for when
-threads are used at all).
+A job is described by a worker's int64 control array (slots :data:`GEN` ...
+:data:`ERROR`): the caller writes the chunk's bounds into it and then increments the job
+counter ``GEN``; the worker steps ``index[LO:HI]`` and sets ``DONE = GEN``. The external
+yield call between a poll and the next read is opaque to the compiler, so no read of
+the control array or the rows moves across it. Polling takes CPU from another process
+only while jobs keep coming; whether threads are used at all is measured by
+:mod:`tether_gym.envs.threads`.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import sys
 import threading
 from collections.abc import Callable
+from typing import Any, NamedTuple
 
-__all__ = ["ChunkWorker"]
+import numpy as np
+from numba import njit
+
+from ..physics.jit import INLINE, LOOP
+
+__all__ = ["Relay", "SpinWorker", "next_job", "wait_done", "yield_function", "GEN", "DONE",
+           "LO", "HI", "STOP", "ERROR", "SLOTS", "POLLS"]
+
+GEN, DONE, LO, HI, STOP, ERROR = range(6)
+"""Slots of a worker's control array: job counter, last job done, chunk bounds, stop flag,
+error flag."""
+
+SLOTS = 8
+"""Length of a control array [-]."""
+
+POLLS = 2000
+"""Polls (each a ``sched_yield``, about 0.5 us on an idle core) before an idle worker
+blocks [-]."""
 
 
-class ChunkWorker:
-    """A daemon thread that runs one job per :meth:`start` and reports it by :meth:`wait`."""
+class Relay(NamedTuple):
+    """How a call of the compiled step relates to worker threads.
 
-    def __init__(self, name: str = "tether_gym-rows"):
+    ``polls`` 0: an ordinary call (the caller's rows, once); > 0: the call serves the
+    jobs posted to ``ctl`` until none came for ``polls`` polls. ``give_up`` is
+    :func:`yield_function`'s result.
+    """
+
+    ctl: np.ndarray   # (SLOTS,) int64 control array
+    give_up: Any      # ctypes function () -> int
+    polls: int
+
+
+def yield_function() -> tuple[Any, bool]:
+    """(the C function that gives up the core, whether it is a real one).
+
+    ``sched_yield`` (POSIX) or ``SwitchToThread`` (Windows); where neither is found, a
+    do-nothing stand-in (the compiled step's type needs a function) and False: the
+    vector env then steps on one thread.
+    """
+    try:
+        if sys.platform == "win32":
+            fn = ctypes.windll.kernel32.SwitchToThread  # type: ignore[attr-defined]
+        else:
+            fn = ctypes.CDLL(ctypes.util.find_library("c") or None).sched_yield
+    except (OSError, AttributeError):  # pragma: no cover - platform without either
+        return ctypes.CFUNCTYPE(ctypes.c_int)(lambda: 0), False
+    fn.restype = ctypes.c_int
+    fn.argtypes = []
+    return fn, True
+
+
+@njit(**INLINE)
+def next_job(relay, seen):
+    """The next job posted to ``relay.ctl`` after job ``seen``, or -1.
+
+    Polls up to ``relay.polls`` times; -1 when none came or ``STOP`` is set. On return
+    with a job, its bounds, rows and actions (written before ``GEN``) can be read.
+    """
+    ctl = relay.ctl
+    job = ctl[GEN]
+    idle = 0
+    while job == seen and idle < relay.polls:
+        relay.give_up()
+        idle += 1
+        job = ctl[GEN]
+    if job == seen or ctl[STOP]:
+        return -1
+    relay.give_up()  # a compiler barrier: the bounds are read after GEN
+    return job
+
+
+@njit(nogil=True, **LOOP)
+def wait_done(ctl, job, give_up):
+    """Poll until ``ctl[DONE]`` reaches ``job``; return the number of polls (0: it had)."""
+    polls = 0
+    while ctl[DONE] < job:
+        give_up()
+        polls += 1
+    give_up()  # the worker's rows are read after DONE
+    return polls
+
+
+class SpinWorker:
+    """A daemon thread that steps the chunks posted to it (see the module docstring).
+
+    Parameters
+    ----------
+    step : callable
+        The compiled step, called as ``step(*args, Relay(ctl, give_up, POLLS))``.
+    args : tuple
+        Its other arguments: the batch's row-index (int64, (B,)) and action (float64,
+        (B, n)) buffers that every job's chunk is read from, its ``Rows``, its
+        ``StepConfig``, this worker's own ``RowWork`` and ``reset=False``.
+    give_up : ctypes function
+        :func:`yield_function`'s function.
+    """
+
+    def __init__(self, step: Callable[..., Any], args: tuple, give_up: Any,
+                 name: str = "tether_gym-rows"):
+        self.ctl = np.zeros(SLOTS, dtype=np.int64)
+        self._step = step
+        self._args = (*args, Relay(self.ctl, give_up, POLLS))
+        self._give_up = give_up
         self._go = threading.Semaphore(0)
-        self._done = threading.Semaphore(0)
-        self._job: Callable[[], object] | None = None
         self._error: BaseException | None = None
+        self._stopped = False
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._thread.start()
 
     def _loop(self) -> None:
         while True:
             self._go.acquire()
-            job = self._job
-            if job is None:
+            while self._go.acquire(blocking=False):  # posts seen by the last call
+                pass
+            if self._stopped:
                 return
             try:
-                job()
+                self._step(*self._args)
             except BaseException as exc:  # noqa: BLE001 - handed to the caller in wait()
                 self._error = exc
-            self._done.release()
+                self.ctl[ERROR] = 1
+                self.ctl[DONE] = self.ctl[GEN]
 
-    def start(self, job: Callable[[], object]) -> None:
-        """Run ``job()`` on the worker thread."""
-        self._job = job
-        self._go.release()
+    def start(self, lo: int, hi: int) -> int:
+        """Post the chunk ``index[lo:hi]``; return its job number."""
+        ctl = self.ctl
+        ctl[LO] = lo
+        ctl[HI] = hi
+        job = int(ctl[GEN]) + 1
+        ctl[GEN] = job
+        self._go.release()  # wakes the worker if it is blocked (else a no-op for it)
+        return job
 
-    def wait(self) -> None:
-        """Block until the job given to :meth:`start` has finished; re-raise its error."""
-        self._done.acquire()
-        error, self._error = self._error, None
-        if error is not None:
-            raise error
+    def wait(self, job: int) -> int:
+        """Block until job ``job`` is done; return the polls it took (0: done already).
+
+        Re-raises an error of the worker thread.
+        """
+        polls = wait_done(self.ctl, job, self._give_up)
+        if self.ctl[ERROR]:
+            self.ctl[ERROR] = 0
+            error, self._error = self._error, None
+            raise RuntimeError("a worker thread of the vector env failed") from error
+        return polls
 
     def stop(self) -> None:
         """End the thread (after its current job)."""
-        self._job = None
+        self._stopped = True
+        self.ctl[STOP] = 1
+        self.ctl[GEN] += 1
         self._go.release()
         self._thread.join()

@@ -60,23 +60,27 @@ from .layout import at
 from .orbit import coriolis, ddlength_from_accel
 from .state import GRAVITY_FULL_CODE, P, S, mass_fraction
 
-__all__ = ["Scratch", "Substeps", "StepInputs", "StepOutputs", "make_scratch", "advance_one",
-           "controlled_rhs", "transition_rows", "accel_rows",
-           "affine_rows"]
+__all__ = ["Scratch", "Substeps", "StepInputs", "StepOutputs", "make_scratch", "sin_cos_nu",
+           "advance_one", "controlled_rhs", "transition_rows", "accel_rows", "affine_rows"]
 
 
 class Scratch(NamedTuple):
-    """Work arrays of one thread: the SPD solve (S, R), link terms V, tensions, RK4 stages."""
+    """Work arrays of one thread: SPD solve, link terms, tensions, RK4 stages, orbit cache.
+
+    The solve uses S and R, the link terms V, and ``orbit`` holds the last
+    (nu, sin nu, cos nu) (:func:`sin_cos_nu`).
+    """
 
     S: np.ndarray        # (n, n)
     R: np.ndarray        # (n, 1)
-    V: np.ndarray        # (9, n)
+    V: np.ndarray        # (7, n)
     tension: np.ndarray  # (n,)
     k1: np.ndarray       # (4n,) RK4 stages, then the stage input
     k2: np.ndarray
     k3: np.ndarray
     k4: np.ndarray
     tmp: np.ndarray
+    orbit: np.ndarray    # (3,) nu, sin nu, cos nu; nu NaN before the first evaluation
 
 
 class Substeps(NamedTuple):
@@ -107,8 +111,9 @@ def make_scratch(n: int) -> Scratch:
     Plain Python: a compiled allocator cost 0.4 s of every cold start.
     """
     m = 4 * n
-    return Scratch(np.empty((n, n)), np.empty((n, 1)), np.empty((9, n)), np.empty(n),
-                   np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+    return Scratch(np.empty((n, n)), np.empty((n, 1)), np.empty((7, n)), np.empty(n),
+                   np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m),
+                   np.full(3, np.nan))
 
 
 # --------------------------------------------------------------------------- #
@@ -123,22 +128,42 @@ def make_scratch(n: int) -> Scratch:
 # IR-level inlining deep-copies the callee's IR at every level, and inlining these two
 # took 40 % of a cold start (12.7 s -> 8.7 s for import + make + reset + step with an
 # empty cache, measured under load), with bitwise-identical trajectories.
+@njit(**LOOP)
+def sin_cos_nu(nu, orbit):
+    """(sin nu, cos nu), computed only when nu differs from the last call's (``orbit``).
+
+    A step evaluates the right-hand side at 9 true anomalies of which 5 differ (RK4's
+    two middle stages share one, a substep's end is the next one's start, and the
+    step's last evaluation is at its end), and the observation reads the end's again.
+    ``orbit`` = (nu, sin nu, cos nu) of the last computation, per thread.
+    """
+    if nu != orbit[0]:
+        orbit[0] = nu
+        orbit[1] = math.sin(nu)
+        orbit[2] = math.cos(nu)
+    return orbit[1], orbit[2]
+
+
 @njit(**INLINE)
-def _links(nu, y, n, par, V):
+def _links(nu, y, n, par, work):
     """Link trigonometry and the projected tail gravity; returns (q, sin nu, k).
 
-    V rows: 0 cos th, 1 sin th, 2 w = 1 + th', 3 G^perp, 4 G^par, 5..6 scratch.
+    ``work.V`` rows: 0 cos th, 1 sin th, 2 w = 1 + th', 3 G^perp, 4 G^par, 5..6 scratch.
     """
+    V = work.V
     ecc = par[at(P.eccentricity, n)]
-    sn = math.sin(nu)
-    k = 1.0 + ecc * math.cos(nu)
+    sn, cn = sin_cos_nu(nu, work.orbit)
+    k = 1.0 + ecc * cn
     q = 2.0 * ecc * sn / k
     th = at(S.theta, n)
     dth = at(S.dtheta, n)
     ln = at(S.length, n)
     for i in range(n):
-        V[0, i] = math.cos(y[th + i])
-        V[1, i] = math.sin(y[th + i])
+        # one load of theta_i: the compiler then pairs cos and sin into one sincos call
+        # (with two loads it must assume the store to V may have changed y)
+        angle = y[th + i]
+        V[0, i] = math.cos(angle)
+        V[1, i] = math.sin(angle)
         V[2, i] = 1.0 + y[dth + i]
     # body positions rho_i and their gravity g_i (relative to the main satellite)
     rr = 0.0
@@ -296,7 +321,7 @@ def controlled_rhs(nu, y, args, dy, node):
     inputs, par, work = args.inputs, args.par, args.work
     cmd = inputs.command
     n = cmd.shape[0]
-    q, sn, k = _links(nu, y, n, par, work.V)
+    q, sn, k = _links(nu, y, n, par, work)
     ecc = par[at(P.eccentricity, n)]
     th = at(S.theta, n)
     dth = at(S.dtheta, n)
@@ -365,7 +390,7 @@ def accel_rows(nu, y, ddlength, par, ddtheta, tension, work):
     shared = par.shape[0] == 1
     for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
-        q, sn, k = _links(nu[b], y[b], n, pb, work.V)
+        q, sn, k = _links(nu[b], y[b], n, pb, work)
         _theta_ddot(y[b], n, ddlength[b], 0, pb, work, q, ddtheta[b], 0)
         _tension(y[b], n, ddlength[b], 0, ddtheta[b], 0, pb, work.V, q, tension[b])
 
@@ -382,7 +407,7 @@ def affine_rows(nu, y, par, f, Bmat, Dmat, work, R):
     for b in range(y.shape[0]):
         pb = par[0] if shared else par[b]
         yb = y[b]
-        q, sn, k = _links(nu[b], yb, n, pb, work.V)
+        q, sn, k = _links(nu[b], yb, n, pb, work)
         S_ = work.S
         for j in range(n):
             b0 = work.V[3, j]

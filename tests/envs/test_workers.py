@@ -1,0 +1,86 @@
+"""Tests of the polling worker threads of the threaded step (tether_gym.envs.workers).
+
+The vector-env tests show that threaded steps give the serial results bit for bit;
+these pin the hand-over itself: a posted chunk is stepped exactly once, a serving step
+gives up after its polls instead of spinning for ever, a worker that fails reports the
+error to the caller, and ``stop`` ends the thread.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tether_gym.envs import EnvConfig
+from tether_gym.envs.batch import CAN_THREAD, GIVE_UP, ChainBatch
+from tether_gym.envs.step_kernel import new_row_work, step_rows
+from tether_gym.envs.workers import DONE, GEN, HI, LO, STOP, Relay, SpinWorker, wait_done
+
+pytestmark = pytest.mark.skipif(not CAN_THREAD, reason="no sched_yield on this platform")
+
+NUM = 6
+
+
+def started_batch() -> tuple[ChainBatch, list]:
+    batch = ChainBatch(EnvConfig.from_kwargs(), NUM)
+    rngs = [np.random.default_rng(b) for b in range(NUM)]
+    batch.reset_rows(np.arange(NUM), rngs)
+    return batch, rngs
+
+
+def buffers(batch: ChainBatch, action: np.ndarray):
+    index = np.arange(NUM, dtype=np.int64)
+    return index, np.ascontiguousarray(action, dtype=np.float64)
+
+
+def test_a_serving_step_steps_a_posted_chunk_once_and_returns_when_idle():
+    batch, _ = started_batch()
+    reference, _ = started_batch()
+    action = np.linspace(-1.0, 1.0, NUM * 2).reshape(NUM, 2)
+    index, act = buffers(batch, action)
+    ctl = np.zeros(8, dtype=np.int64)
+    ctl[LO], ctl[HI], ctl[GEN] = 2, 5, 1  # job 1: rows 2, 3, 4
+    serving = Relay(ctl, GIVE_UP, 50)
+    work = new_row_work(batch.n)
+    assert step_rows(index, act, batch.rows, batch.cfg, work, False, serving) == -1
+    assert ctl[DONE] == 1
+    reference.step(act, None, np.array([2, 3, 4], dtype=np.int64))
+    for name, value in batch.rows._asdict().items():
+        assert np.array_equal(value, reference.rows._asdict()[name]), name
+    # nothing posted: it polls 50 times and returns, stepping nothing
+    before = batch.rows.y.copy()
+    step_rows(index, act, batch.rows, batch.cfg, work, False, serving)
+    assert ctl[DONE] == 1 and np.array_equal(batch.rows.y, before)
+    assert wait_done(ctl, 1, GIVE_UP) == 0  # done already: no poll
+    # a stop posted as a job: it returns at once, stepping nothing
+    ctl[STOP], ctl[GEN] = 1, 2
+    step_rows(index, act, batch.rows, batch.cfg, work, False, serving)
+    assert ctl[DONE] == 1 and np.array_equal(batch.rows.y, before)
+
+
+def test_a_worker_steps_chunks_and_stops():
+    batch, _ = started_batch()
+    reference, _ = started_batch()
+    action = np.full((NUM, 2), 0.3)
+    index, act = buffers(batch, action)
+    worker = SpinWorker(step_rows, (index, act, batch.rows, batch.cfg,
+                                    new_row_work(batch.n), False), GIVE_UP)
+    for _ in range(3):
+        worker.wait(worker.start(0, NUM))
+        reference.step(act, None)
+    assert worker.ctl[DONE] == 3
+    assert np.array_equal(batch.rows.y, reference.rows.y)
+    worker.stop()
+    assert not worker._thread.is_alive()
+
+
+def test_a_failing_worker_reports_its_error_to_the_caller():
+    batch, _ = started_batch()
+    index, act = buffers(batch, np.zeros((NUM, 2)))
+    # rows=None cannot be typed: the worker's call of the step raises
+    worker = SpinWorker(step_rows, (index, act, None, batch.cfg, new_row_work(batch.n),
+                                    False), GIVE_UP)
+    with pytest.raises(RuntimeError, match="worker thread") as err:
+        worker.wait(worker.start(0, NUM))
+    assert err.value.__cause__ is not None
+    worker.stop()
