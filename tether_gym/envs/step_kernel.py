@@ -29,7 +29,7 @@ from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
 from ..tasks.termination import KEEP_PREVIOUS, failure_code, start_failed
 from .layout import I, O
-from .workers import DONE, HI, LO, next_job
+from .workers import DONE, HI, LO, call_address, next_job
 
 __all__ = ["StepConfig", "Rows", "RowWork", "make_row_work", "step_rows"]
 
@@ -307,6 +307,6 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
             write_outputs(b, rows, cfg, anomaly)
         if not serving:
             return bad
-        relay.give_up()  # a compiler barrier: the rows are written before DONE
+        call_address(relay.give_up)  # a compiler barrier: the rows are written before DONE
         ctl[DONE] = job
         seen = job

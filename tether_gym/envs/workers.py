@@ -32,12 +32,14 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core.extending import intrinsic
 
 from ..physics.jit import INLINE, LOOP
 
-__all__ = ["Relay", "SpinWorker", "next_job", "wait_done", "yield_function", "GEN", "DONE",
-           "LO", "HI", "STOP", "ERROR", "SLOTS", "POLLS"]
+__all__ = ["Relay", "SpinWorker", "call_address", "next_job", "wait_done", "yield_function",
+           "GEN", "DONE", "LO", "HI", "STOP", "ERROR", "SLOTS", "POLLS"]
 
 GEN, DONE, LO, HI, STOP, ERROR = range(6)
 """Slots of a worker's control array: job counter, last job done, chunk bounds, stop flag,
@@ -56,31 +58,57 @@ class Relay(NamedTuple):
 
     ``polls`` 0: an ordinary call (the caller's rows, once); > 0: the call serves the
     jobs posted to ``ctl`` until none came for ``polls`` polls. ``give_up`` is
-    :func:`yield_function`'s result.
+    :func:`yield_function`'s address.
     """
 
     ctl: np.ndarray   # (SLOTS,) int64 control array
-    give_up: Any      # ctypes function () -> int
+    give_up: int      # address of the C function int f(void) that yields the core
     polls: int
 
 
-def yield_function() -> tuple[Any, bool]:
-    """(the C function that gives up the core, whether it is a real one).
+_KEEP: list = []
+"""The ctypes objects whose addresses :func:`yield_function` handed out (kept alive)."""
+
+
+def yield_function() -> tuple[int, bool]:
+    """(the address of a C function that gives up the core, whether it is a real one).
 
     ``sched_yield`` (POSIX) or ``SwitchToThread`` (Windows); where neither is found, a
-    do-nothing stand-in (the compiled step's type needs a function) and False: the
-    vector env then steps on one thread.
+    do-nothing stand-in (the compiled step needs some function) and False: the vector
+    env then steps on one thread. An address (an int) rather than the ctypes function
+    itself: numba converts a ctypes function argument through Python on every call,
+    2-3 us, more than the rest of a call of the single env's step.
     """
+    real = True
     try:
         if sys.platform == "win32":
             fn = ctypes.windll.kernel32.SwitchToThread  # type: ignore[attr-defined]
         else:
             fn = ctypes.CDLL(ctypes.util.find_library("c") or None).sched_yield
+        fn.restype = ctypes.c_int
+        fn.argtypes = []
     except (OSError, AttributeError):  # pragma: no cover - platform without either
-        return ctypes.CFUNCTYPE(ctypes.c_int)(lambda: 0), False
-    fn.restype = ctypes.c_int
-    fn.argtypes = []
-    return fn, True
+        fn = ctypes.CFUNCTYPE(ctypes.c_int)(lambda: 0)
+        real = False
+    _KEEP.append(fn)
+    return int(ctypes.cast(fn, ctypes.c_void_p).value or 0), real
+
+
+@intrinsic
+def call_address(typingctx, address):
+    """Call the C function ``int f(void)`` at ``address`` (an int); return its result.
+
+    The call is opaque to the compiler, so no read or write of memory that other
+    threads can see moves across it.
+    """
+    if not isinstance(address, types.Integer):
+        return None
+
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(ir.IntType(32), [])
+        return builder.call(builder.inttoptr(args[0], fnty.as_pointer()), [])
+
+    return types.int32(address), codegen
 
 
 @njit(**INLINE)
@@ -94,12 +122,12 @@ def next_job(relay, seen):
     job = ctl[GEN]
     idle = 0
     while job == seen and idle < relay.polls:
-        relay.give_up()
+        call_address(relay.give_up)
         idle += 1
         job = ctl[GEN]
     if job == seen or ctl[STOP]:
         return -1
-    relay.give_up()  # a compiler barrier: the bounds are read after GEN
+    call_address(relay.give_up)  # a compiler barrier: the bounds are read after GEN
     return job
 
 
@@ -108,9 +136,9 @@ def wait_done(ctl, job, give_up):
     """Poll until ``ctl[DONE]`` reaches ``job``; return the number of polls (0: it had)."""
     polls = 0
     while ctl[DONE] < job:
-        give_up()
+        call_address(give_up)
         polls += 1
-    give_up()  # the worker's rows are read after DONE
+    call_address(give_up)  # the worker's rows are read after DONE
     return polls
 
 
@@ -125,11 +153,11 @@ class SpinWorker:
         Its other arguments: the batch's row-index (int64, (B,)) and action (float64,
         (B, n)) buffers that every job's chunk is read from, its ``Rows``, its
         ``StepConfig``, this worker's own ``RowWork`` and ``reset=False``.
-    give_up : ctypes function
-        :func:`yield_function`'s function.
+    give_up : int
+        :func:`yield_function`'s address.
     """
 
-    def __init__(self, step: Callable[..., Any], args: tuple, give_up: Any,
+    def __init__(self, step: Callable[..., Any], args: tuple, give_up: int,
                  name: str = "tether_gym-rows"):
         self.ctl = np.zeros(SLOTS, dtype=np.int64)
         self._step = step
