@@ -80,6 +80,7 @@ def yield_function() -> tuple[int, bool]:
     2-3 us, more than the rest of a call of the single env's step.
     """
     real = True
+    fn: Any
     try:
         if sys.platform == "win32":
             fn = ctypes.windll.kernel32.SwitchToThread  # type: ignore[attr-defined]

@@ -1,5 +1,5 @@
 #!/bin/bash
-# One 1M-step PPO run of the precision screen: variant (g1 | lin), seed.
+# One 1M-step PPO run of the precision screen: variant (g1 | lin | net256), seed.
 # configs/ppo.yml otherwise; the baseline (increment gain 0.5) is runs/gain/g0.5.
 v=$1; s=$2
 here=$(cd "$(dirname "$0")" && pwd)
@@ -8,6 +8,7 @@ export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 case $v in
   g1) extra=(--env-kwargs increment_gain=1.0) ;;        # increment gain 1.0 instead of 0.5
   lin) extra=(--config "$here/ppo_lin.yml") ;;          # learning rate 3e-4 falling linearly to 0
+  net256) extra=(--config "$here/ppo_net256.yml") ;;    # [256, 256] networks instead of [64, 64]
   *) echo "unknown variant $v"; exit 2 ;;
 esac
 out=runs/screen/$v/seed_$s
