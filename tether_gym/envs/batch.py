@@ -7,7 +7,7 @@ the randomised parameters (e, then the masses), then the initial perturbations
 the observation noise.
 
 :meth:`ChainBatch.step` can advance a subset of the rows (the vector env leaves the
-rows it is about to auto-reset alone) and can spread the rows over numba's threads;
+rows it is about to auto-reset alone) and can spread the rows over worker threads;
 every row runs the same compiled code either way, so the results do not change.
 Threads are Python threads that run the compiled step on contiguous chunks of rows
 without the GIL, each with its own scratch (:mod:`.workers`).
@@ -50,7 +50,8 @@ LEAD_MARGIN = 2.0
 """Rows by which a threaded step's workers should end before the calling thread [-]."""
 
 GIVE_UP, CAN_THREAD = yield_function()
-"""The workers' yield function, and whether it is a real one (else every step is serial)."""
+"""The address of the workers' yield function, and whether it is a real one (else every
+step is serial)."""
 
 MAX_RESET_DRAWS = 100
 """Draws per row before a configuration whose initial states all fail is rejected."""
