@@ -84,3 +84,37 @@ def test_a_failing_worker_reports_its_error_to_the_caller():
         worker.wait(worker.start(0, NUM))
     assert err.value.__cause__ is not None
     worker.stop()
+
+
+def _step_in_child(env, action, out):
+    obs, *_ = env.step(action)
+    out.put(obs)
+
+
+def test_a_forked_child_steps_on_threads_of_its_own():
+    """A child forked after threaded steps has the workers' objects but not their
+    threads: it starts its own instead of waiting for ever."""
+    import multiprocessing
+
+    from tether_gym.envs.vector import TetherLibrationVectorEnv
+
+    try:
+        ctx = multiprocessing.get_context("fork")
+    except ValueError:
+        pytest.skip("no fork on this platform")
+    env = TetherLibrationVectorEnv(8, parallel=True)
+    twin = TetherLibrationVectorEnv(8, parallel=False)
+    env.reset(seed=1)
+    twin.reset(seed=1)
+    action = np.full((8, 2), 0.2)
+    env.step(action)
+    twin.step(action)
+    queue = ctx.Queue()
+    child = ctx.Process(target=_step_in_child, args=(env, action, queue))
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():
+        child.terminate()
+    assert child.exitcode == 0
+    expected, *_ = twin.step(action)
+    assert np.array_equal(queue.get(timeout=5), expected)

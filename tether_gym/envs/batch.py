@@ -15,6 +15,7 @@ without the GIL, each with its own scratch (:mod:`.workers`).
 
 from __future__ import annotations
 
+import os
 import time
 import weakref
 from collections.abc import Callable
@@ -417,6 +418,8 @@ class ChainBatch:
         """
         while len(self._work) < n_chunks:
             self._work.append(new_row_work(self.n))
+        if self._workers and self._workers[0].pid != os.getpid():
+            self._workers.clear()  # inherited through a fork: their threads stayed behind
         while len(self._workers) < n_chunks - 1:
             work = self._work[len(self._workers) + 1]
             self._workers.append(SpinWorker(

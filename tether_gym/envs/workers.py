@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import os
 import sys
 import threading
 from collections.abc import Callable
@@ -161,6 +162,7 @@ class SpinWorker:
     def __init__(self, step: Callable[..., Any], args: tuple, give_up: int,
                  name: str = "tether_gym-rows"):
         self.ctl = np.zeros(SLOTS, dtype=np.int64)
+        self.pid = os.getpid()  # a forked child has the object but not the thread
         self._step = step
         self._args = (*args, Relay(self.ctl, give_up, POLLS))
         self._give_up = give_up
