@@ -27,7 +27,7 @@ from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
 from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
-from ..tasks.termination import KEEP_PREVIOUS, failure_code, start_failed
+from ..tasks.termination import KEEP_PREVIOUS, failure_code
 from .layout import I, O
 from .workers import DONE, HI, LO, call_address, next_job
 
@@ -77,7 +77,6 @@ class Rows(NamedTuple):
     nu_end: np.ndarray       # (B,) true anomaly at which the episode is truncated [rad]
     truncated: np.ndarray    # (B,) bool: nu has reached nu_end
     command: np.ndarray      # (B, n) normalised reel-rate command u in [-1, 1] [-]
-    start_failed: np.ndarray  # (B,) bool: the row's last reset drew an unusable start
 
 
 class RowWork(NamedTuple):
@@ -233,10 +232,9 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
     is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``,
     ``noise`` and ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at
     their initial state with the reels holding their rate (the state the first step
-    starts from), their observation and info entries, zero steps, failure code, reward
-    and reward components, the command u = clip(l' / max_reel_rate, -1, 1) (the reels'
-    rate), and ``start_failed`` (:func:`~tether_gym.tasks.termination.start_failed`:
-    the start is already failed, the caller draws again).
+    starts from), their observation and info entries, zero steps and the command u =
+    clip(l' / max_reel_rate, -1, 1) (the reels' rate); their failure code, reward and
+    reward components must be zero.
 
     A row whose state turns non-finite keeps its previous state (so nothing
     non-finite reaches the observation) and gets failure code 1 and reward 0.
@@ -272,10 +270,6 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
             pb = rows.par[0] if shared else rows.par[b]
             out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
             if reset:  # evaluate only: the reels hold their rate, no disturbance
-                rows.failure[b] = 0
-                rows.reward[b] = 0.0
-                for c in range(rows.components.shape[1]):
-                    rows.components[b, c] = 0.0
                 for j in range(n):
                     work.command[j] = yb[at(S.dlength, n) + j]
                     rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0),
@@ -298,8 +292,6 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
             anomaly = anomaly_terms(rows.nu[b], cfg, work.physics.orbit)
             if reset:
                 rows.steps[b] = 0
-                rows.start_failed[b] = start_failed(yb, rows.tension[b], cfg.length_min,
-                                                    cfg.length_max)
             else:
                 rows.steps[b] += 1
                 _task(b, cfg, work, rows, anomaly)

@@ -11,11 +11,11 @@ from enum import IntEnum
 
 from numba import njit
 
-from ..physics.jit import INLINE, LOOP
+from ..physics.jit import INLINE
 from ..physics.layout import at
 from ..physics.state import S
 
-__all__ = ["Failure", "failure_code", "start_failed", "TUMBLE_ANGLE"]
+__all__ = ["Failure", "failure_code", "TUMBLE_ANGLE"]
 
 TUMBLE_ANGLE = 0.5 * math.pi
 """|theta_i| >= pi/2 [rad]: the body has swung above the horizontal (tumbling)."""
@@ -85,27 +85,3 @@ def failure_code(y, tension_min, length_min, length_max):
         if lj < length_min or lj > length_max:
             return 4
     return 0
-
-
-@njit(**LOOP)
-def start_failed(y, tension, length_min, length_max):
-    """True if a freshly drawn start state y (with its tensions T^) cannot start an episode.
-
-    The failure checks of :func:`failure_code` that a start can fail: an entry of y or
-    T^ that is NaN or inf, a slack tether (T^_i <= 0), a tumbled body (|theta_i| >=
-    pi/2) or a length outside [length_min, length_max]. (A start is not checked for
-    divergence: its entries are bounded by the reset's ranges.)
-    """
-    n = tension.shape[0]
-    for i in range(y.shape[0]):
-        if not math.isfinite(y[i]):
-            return True
-    th = at(S.theta, n)
-    ln = at(S.length, n)
-    for j in range(n):
-        t = tension[j]
-        lj = y[ln + j]
-        if (not math.isfinite(t) or t <= 0.0 or abs(y[th + j]) >= TUMBLE_ANGLE
-                or lj < length_min or lj > length_max):
-            return True
-    return False
