@@ -14,31 +14,30 @@ import pytest
 from tether_gym.envs import EnvConfig
 from tether_gym.envs.batch import CAN_THREAD, GIVE_UP, ChainBatch
 from tether_gym.envs.step_kernel import new_row_work, step_rows
-from tether_gym.envs.workers import DONE, GEN, HI, LO, STOP, Relay, SpinWorker, wait_done
+from tether_gym.envs.workers import DONE, GEN, HI, LO, SLOTS, STOP, Relay, SpinWorker, wait_done
 
 pytestmark = pytest.mark.skipif(not CAN_THREAD, reason="no sched_yield on this platform")
 
 NUM = 6
 
 
-def started_batch() -> tuple[ChainBatch, list]:
+def started_batch() -> ChainBatch:
     batch = ChainBatch(EnvConfig.from_kwargs(), NUM)
-    rngs = [np.random.default_rng(b) for b in range(NUM)]
-    batch.reset_rows(np.arange(NUM), rngs)
-    return batch, rngs
+    batch.reset_rows(np.arange(NUM), [np.random.default_rng(b) for b in range(NUM)])
+    return batch
 
 
-def buffers(batch: ChainBatch, action: np.ndarray):
-    index = np.arange(NUM, dtype=np.int64)
-    return index, np.ascontiguousarray(action, dtype=np.float64)
+def buffers(action: np.ndarray):
+    """The row-index and action buffers a worker reads its chunks from."""
+    return np.arange(NUM, dtype=np.int64), np.ascontiguousarray(action, dtype=np.float64)
 
 
 def test_a_serving_step_steps_a_posted_chunk_once_and_returns_when_idle():
-    batch, _ = started_batch()
-    reference, _ = started_batch()
+    batch = started_batch()
+    reference = started_batch()
     action = np.linspace(-1.0, 1.0, NUM * 2).reshape(NUM, 2)
-    index, act = buffers(batch, action)
-    ctl = np.zeros(8, dtype=np.int64)
+    index, act = buffers(action)
+    ctl = np.zeros(SLOTS, dtype=np.int64)
     ctl[LO], ctl[HI], ctl[GEN] = 2, 5, 1  # job 1: rows 2, 3, 4
     serving = Relay(ctl, GIVE_UP, 50)
     work = new_row_work(batch.n)
@@ -59,10 +58,10 @@ def test_a_serving_step_steps_a_posted_chunk_once_and_returns_when_idle():
 
 
 def test_a_worker_steps_chunks_and_stops():
-    batch, _ = started_batch()
-    reference, _ = started_batch()
+    batch = started_batch()
+    reference = started_batch()
     action = np.full((NUM, 2), 0.3)
-    index, act = buffers(batch, action)
+    index, act = buffers(action)
     worker = SpinWorker(step_rows, (index, act, batch.rows, batch.cfg,
                                     new_row_work(batch.n), False), GIVE_UP)
     for _ in range(3):
@@ -75,8 +74,8 @@ def test_a_worker_steps_chunks_and_stops():
 
 
 def test_a_failing_worker_reports_its_error_to_the_caller():
-    batch, _ = started_batch()
-    index, act = buffers(batch, np.zeros((NUM, 2)))
+    batch = started_batch()
+    index, act = buffers(np.zeros((NUM, 2)))
     # rows=None cannot be typed: the worker's call of the step raises
     worker = SpinWorker(step_rows, (index, act, None, batch.cfg, new_row_work(batch.n),
                                     False), GIVE_UP)

@@ -401,7 +401,6 @@ class ChainBatch:
         """
         index = self._all_rows if rows is None else rows
         threaded = n_chunks > 1 and len(index) > 1 and CAN_THREAD
-        bad = -1
         if self._random_step or threaded:
             if not checked:
                 bad = self._check_finite(action, index)

@@ -14,7 +14,7 @@ that the step is compiled once: a second compiled caller recompiles the whole st
 into itself, 8 s of a first threaded step with an empty cache.
 
 A job is described by a worker's int64 control array (slots :data:`GEN` ...
-:data:`ERROR`): the caller writes the chunk's bounds into it and then increments the job
+:data:`STOP`): the caller writes the chunk's bounds into it and then increments the job
 counter ``GEN``; the worker steps ``index[LO:HI]`` and sets ``DONE = GEN``. The external
 yield call between a poll and the next read is opaque to the compiler, so no read of
 the control array or the rows moves across it. Polling takes CPU from another process
@@ -40,11 +40,10 @@ from numba.core.extending import intrinsic
 from ..physics.jit import INLINE, LOOP
 
 __all__ = ["Relay", "SpinWorker", "call_address", "next_job", "wait_done", "yield_function",
-           "GEN", "DONE", "LO", "HI", "STOP", "ERROR", "SLOTS", "POLLS"]
+           "GEN", "DONE", "LO", "HI", "STOP", "SLOTS", "POLLS"]
 
-GEN, DONE, LO, HI, STOP, ERROR = range(6)
-"""Slots of a worker's control array: job counter, last job done, chunk bounds, stop flag,
-error flag."""
+GEN, DONE, LO, HI, STOP = range(5)
+"""Slots of a worker's control array: job counter, last job done, chunk bounds, stop flag."""
 
 SLOTS = 8
 """Length of a control array [-]."""
@@ -183,8 +182,7 @@ class SpinWorker:
                 self._step(*self._args)
             except BaseException as exc:  # noqa: BLE001 - handed to the caller in wait()
                 self._error = exc
-                self.ctl[ERROR] = 1
-                self.ctl[DONE] = self.ctl[GEN]
+                self.ctl[DONE] = self.ctl[GEN]  # releases the caller's wait
 
     def start(self, lo: int, hi: int) -> int:
         """Post the chunk ``index[lo:hi]``; return its job number."""
@@ -202,9 +200,8 @@ class SpinWorker:
         Re-raises an error of the worker thread.
         """
         polls = wait_done(self.ctl, job, self._give_up)
-        if self.ctl[ERROR]:
-            self.ctl[ERROR] = 0
-            error, self._error = self._error, None
+        error, self._error = self._error, None
+        if error is not None:
             raise RuntimeError("a worker thread of the vector env failed") from error
         return polls
 
