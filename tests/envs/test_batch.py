@@ -91,3 +91,45 @@ def test_step_draws_are_each_rows_uniform_then_normal(rows):
         else:  # rows not stepped draw nothing
             assert np.array_equal(batch.rows.disturbance[b], before_dist[b])
             assert np.array_equal(batch.rows.noise[b], before_noise[b])
+
+
+@pytest.mark.parametrize("kwargs", [{}, RANDOMISED])
+def test_drawn_start_equals_the_start_built_field_by_field(kwargs):
+    # options={"nu": the configured nu(0)} take the general path (fields one by one,
+    # the same draws); no options the path that draws theta, theta', l in one sum
+    config = EnvConfig.from_kwargs(**{"n_bodies": 4, **kwargs})
+    fast, general = ChainBatch(config, 4), ChainBatch(config, 4)
+    fast.reset_rows([0, 2, 3], [np.random.default_rng(7 + b) for b in range(4)])
+    general.reset_rows([0, 2, 3], [np.random.default_rng(7 + b) for b in range(4)],
+                       {"nu": float(config.initial_nu)})
+    for name, value in _arrays(fast).items():
+        assert np.array_equal(value, _arrays(general)[name]), name
+
+
+def test_failed_start_is_each_bound_with_its_own_strictness():
+    config = EnvConfig.from_kwargs(n_bodies=3)
+    lo, hi = config.episode.length_bounds
+    half = 0.5 * np.pi
+    below = np.nextafter
+    # (theta, theta', l, l', T^) of tether 0; tether 1 stays nominal; True: failed
+    cases = [((0.1, 0.0, 1.0, 0.0, 1.0), False),
+             ((below(half, 0.0), 0.0, 1.0, 0.0, 1.0), False),
+             ((half, 0.0, 1.0, 0.0, 1.0), True),
+             ((-half, 0.0, 1.0, 0.0, 1.0), True),
+             ((0.1, 0.0, lo, 0.0, 1.0), False),
+             ((0.1, 0.0, hi, 0.0, 1.0), False),
+             ((0.1, 0.0, below(lo, -np.inf), 0.0, 1.0), True),
+             ((0.1, 0.0, below(hi, np.inf), 0.0, 1.0), True),
+             ((0.1, np.nan, 1.0, 0.0, 1.0), True),
+             ((0.1, 0.0, 1.0, np.inf, 1.0), True),
+             ((0.1, -np.inf, 1.0, 0.0, 1.0), True),
+             ((0.1, 0.0, 1.0, 0.0, 0.0), True),
+             ((0.1, 0.0, 1.0, 0.0, np.inf), True),
+             ((0.1, 0.0, 1.0, 0.0, 1e-300), False)]
+    batch = ChainBatch(config, len(cases))
+    for b, ((theta, dtheta, length, dlength, tension), _) in enumerate(cases):
+        # STATE order: theta_0, theta_1, theta'_0, theta'_1, l_0, l_1, l'_0, l'_1
+        batch.rows.y[b] = [theta, 0.0, dtheta, 0.0, length, 1.0, dlength, 0.0]
+        batch.rows.tension[b] = [tension, 1.0]
+    failed = batch._failed_at_start(np.arange(len(cases)))
+    assert failed.tolist() == [want for _, want in cases]

@@ -158,9 +158,13 @@ class StartPlan(NamedTuple):
     ref: float
     dref: float
     eq10: tuple | None  # (num, den) of Eq. 10 at nu0 and the fixed e; None when e is drawn
+    #   (or when a den is 0)
     episode_length: float
     length_bounds: tuple
-    slices: dict
+    start_base: np.ndarray  # (3n,) initial theta, theta_d'(nu0), initial lengths
+    start_spread: np.ndarray  # (3n,) their init_*_range
+    state_low: np.ndarray  # (4n,) a start state row must lie strictly inside these
+    state_high: np.ndarray
 
     @classmethod
     def of(cls, config: EnvConfig) -> StartPlan:
@@ -176,12 +180,31 @@ class StartPlan(NamedTuple):
                                          expand_like(dref, like),
                                          np.full((1, 1), config.eccentricity),
                                          amplitude, frequency)
+            if not np.all(eq10[1] != 0.0):
+                eq10 = None  # every start fails: refused by the general path
+        if STATE.names != ("theta", "dtheta", "length", "dlength"):
+            raise RuntimeError(f"StartPlan assumes the state order theta, dtheta, length, "
+                               f"dlength, not {STATE.names}")
+        n = config.n_tethers
+        theta0 = np.asarray(config.initial_theta, dtype=float)
+        lengths0 = np.asarray(config.initial_lengths, dtype=float)
+        ones = np.ones(n)
+        lo, hi = config.episode.length_bounds
+        # theta in (-pi/2, pi/2), l in [lo, hi] (the next floats out make it strict),
+        # theta' and l' finite: the start conditions of _failed_at_start, one comparison
+        bounds = {"theta": (-0.5 * np.pi, 0.5 * np.pi), "dtheta": (-np.inf, np.inf),
+                  "length": (np.nextafter(lo, -np.inf), np.nextafter(hi, np.inf)),
+                  "dlength": (-np.inf, np.inf)}
         return cls(config.eccentricity, np.asarray(config.masses, dtype=float),
                    config.randomised, rnd.eccentricity_range, rnd.mass_range, rnd.obs_noise,
                    rnd.init_theta_range, rnd.init_dtheta_range, rnd.init_length_range,
-                   np.asarray(config.initial_theta), np.asarray(config.initial_lengths),
-                   amplitude, frequency, nu0, ref, dref, eq10, config.episode_length,
-                   config.episode.length_bounds, STATE.slices(config.n_tethers))
+                   theta0, lengths0, amplitude, frequency, nu0, ref, dref, eq10,
+                   config.episode_length, config.episode.length_bounds,
+                   np.concatenate([theta0, dref * ones, lengths0]),
+                   np.concatenate([rnd.init_theta_range * ones, rnd.init_dtheta_range * ones,
+                                   rnd.init_length_range * ones]),
+                   np.concatenate([bounds[name][0] * ones for name in STATE.names]),
+                   np.concatenate([bounds[name][1] * ones for name in STATE.names]))
 
 
 class ChainBatch:
@@ -296,19 +319,19 @@ class ChainBatch:
     def _failed_at_start(self, rows: np.ndarray) -> np.ndarray:
         """Mask of the listed rows whose initial state is non-finite or failed.
 
+        Failed: a theta_i outside (-pi/2, pi/2), a length outside ``length_bounds`` or a
+        tension T^_i <= 0.
+
         (Checked here rather than in the compiled reset, where it was tried: it saved
         20 us per reset call but added to the compile time of every cold start.)
         """
-        r = self.rows
-        sl = self._plan.slices
-        y = r.y[rows]
-        lo, hi = self._plan.length_bounds
-        length = y[:, sl["length"]]
-        tension = r.tension[rows]
-        return (~np.isfinite(y).all(axis=1) | ~np.isfinite(tension).all(axis=1)
-                | (tension <= 0.0).any(axis=1)
-                | (np.abs(y[:, sl["theta"]]) >= 0.5 * np.pi).any(axis=1)
-                | ((length < lo) | (length > hi)).any(axis=1))
+        plan = self._plan
+        y = self.rows.y[rows]
+        tension = self.rows.tension[rows]
+        # NaN fails every comparison, +-inf one of each pair
+        ok = ((y > plan.state_low) & (y < plan.state_high)).all(axis=1)
+        ok &= ((tension > 0.0) & (tension < np.inf)).all(axis=1)
+        return ~ok
 
     def _start_failure(self, b: int) -> str:
         """Why row b's initial state fails, in words."""
@@ -352,27 +375,34 @@ class ChainBatch:
         else:
             ref, dref, _ = desired_libration(nu0, plan.amplitude, plan.frequency)
         shape = (count, n)
-        theta = (np.broadcast_to(opts["theta"], shape) if "theta" in opts else
-                 plan.initial_theta + unit[:, :n] * plan.init_theta_range)
-        dtheta = (np.broadcast_to(opts["dtheta"], shape) if "dtheta" in opts else
-                  dref + unit[:, n:2 * n] * plan.init_dtheta_range)
-        length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
-                  plan.initial_lengths + unit[:, 2 * n:] * plan.init_length_range)
+        if opts:
+            theta = (np.broadcast_to(opts["theta"], shape) if "theta" in opts else
+                     plan.initial_theta + unit[:, :n] * plan.init_theta_range)
+            dtheta = (np.broadcast_to(opts["dtheta"], shape) if "dtheta" in opts else
+                      dref + unit[:, n:2 * n] * plan.init_dtheta_range)
+            length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
+                      plan.initial_lengths + unit[:, 2 * n:] * plan.init_length_range)
+        else:  # the same sums, for theta, theta' and l at once
+            drawn = plan.start_base + unit * plan.start_spread
+            length = drawn[:, 2 * n:]
         # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference
         # (infinite where theta_d' = -1: such a start is refused below)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            if "dlength" in opts:
-                dlength = np.broadcast_to(opts["dlength"], shape)
-            elif at_plan and plan.eq10 is not None:  # periodic_reel_rate's last line
-                num, den = plan.eq10
-                dlength = length * num / den
-            else:
+        if "dlength" in opts:
+            dlength = np.broadcast_to(opts["dlength"], shape)
+        elif at_plan and plan.eq10 is not None:  # periodic_reel_rate's last line
+            num, den = plan.eq10  # den != 0 (StartPlan.of)
+            dlength = length * num / den
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
                 dlength = periodic_reel_rate(nu0, ref, dref, length, ecc[:, None],
                                              plan.amplitude, plan.frequency)
         r.nu[rows] = nu0
         r.nu_end[rows] = nu0 + plan.episode_length
-        fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
-        r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
+        if opts:
+            fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
+            r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
+        else:  # STATE order (StartPlan.of checks it)
+            r.y[rows] = np.concatenate((drawn, dlength), axis=1)
         r.failure[rows] = 0
         r.reward[rows] = 0.0
         r.components[rows] = 0.0

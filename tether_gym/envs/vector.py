@@ -10,6 +10,7 @@ driven the same way.
 from __future__ import annotations
 
 import time
+from itertools import chain
 from typing import Any
 
 import numpy as np
@@ -21,10 +22,14 @@ from gymnasium.vector.utils import batch_space
 from ..physics import TetherChain
 from .batch import ChainBatch, check_options
 from .config import EnvConfig
+from .layout import INFO_KEYS
 from .tether_libration import action_space, eccentricity_of, observation_space
 from .threads import ThreadPolicy
 
 __all__ = ["TetherLibrationVectorEnv"]
+
+_PAIRED_KEYS = tuple(chain.from_iterable((key, "_" + key) for key in INFO_KEYS))
+"""The vector infos' keys in gymnasium's order: each key, then its mask ``_key``."""
 
 
 def _check_seeds(seed, num_envs: int) -> list[int | None]:
@@ -275,12 +280,10 @@ class TetherLibrationVectorEnv(VectorEnv):
         values = self._batch.info_arrays()
         infos: dict[str, Any] = {}
         if mask is None:
-            # one buffer for all the "_key" masks: each key still gets its own array
+            # one buffer for all the "_key" masks: each key still gets its own row of it
             every = np.ones((len(values), self.num_envs), dtype=np.bool_)
-            for i, (key, value) in enumerate(values.items()):
-                infos[key] = value
-                infos["_" + key] = every[i]
-            return infos
+            pairs = chain.from_iterable(zip(values.values(), every, strict=True))
+            return dict(zip(_PAIRED_KEYS, pairs, strict=True))
         for key, value in values.items():
             if value.dtype == object:
                 value[~mask] = None
