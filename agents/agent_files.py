@@ -11,7 +11,10 @@ An agent is one folder (a *unit*) with two files:
     id and env kwargs the agent was trained on, the training seed and steps, the
     name and SHA-256 of the weights file, and ``hybrid``: ``null`` for a plain agent,
     ``{"base": "smc", "scale": ..., "filter": ...}`` for the residual of a hybrid
-    (:mod:`tether_gym_agents.residual_spec`; absent in older files, read as ``null``).
+    (:mod:`tether_gym_agents.residual_spec`; absent in older files, read as ``null``),
+    and ``features``: ``null``, or ``{"name": ..., "scale": ...}`` for a policy whose
+    network also sees features computed from the observation
+    (:mod:`tether_gym_agents.features`; absent in older files, read as ``null``).
 ``policy.safetensors``
     The policy's ``state_dict`` in the safetensors format: a JSON header (names,
     dtypes, shapes, offsets) followed by raw tensor bytes. Reading it builds tensors
@@ -41,12 +44,13 @@ from typing import Any
 
 import numpy as np
 
+from .features import FeatureSpec
 from .jsonio import sha256_file, to_jsonable
 from .residual_spec import ResidualSpec
 
 __all__ = ["AgentLoadError", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT", "FORMAT_VERSION",
            "save_agent", "load_agent", "load_pickled_run", "convert_run", "is_unit",
-           "PICKLED_MODEL_FILES", "run_hybrid"]
+           "PICKLED_MODEL_FILES", "run_hybrid", "run_features"]
 
 AGENT_FILE = "agent.json"
 WEIGHTS_FILE = "policy.safetensors"
@@ -172,7 +176,7 @@ def _safetensors():
 def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
                epsilon: float = 1e-8, env_id: str | None = None,
                env_kwargs: dict | None = None, training: dict | None = None,
-               hybrid: dict | None = None) -> Path:
+               hybrid: dict | None = None, features: dict | None = None) -> Path:
     """Write a policy and its observation normalisation as a safe agent folder.
 
     Parameters
@@ -195,6 +199,9 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     hybrid : dict or None
         The residual hybrid the policy is the residual of (``ResidualSpec.to_dict()``:
         base, scale, filter); None for a policy that acts alone.
+    features : dict or None
+        The input features the policy appends to the observation
+        (``FeatureSpec.to_dict()``); None for the observation alone.
 
     Returns
     -------
@@ -204,6 +211,8 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
     algo = algo.lower()
     if hybrid is not None:
         hybrid = ResidualSpec.from_dict(hybrid, "hybrid").to_dict()
+    if features is not None:
+        features = FeatureSpec.from_dict(features, "features").to_dict()
     if algo not in _WEIGHTS_MODULE:
         raise ValueError(f"algo={algo!r} must be one of {sorted(_WEIGHTS_MODULE)}")
     cls_name = type(policy).__name__
@@ -235,6 +244,7 @@ def save_agent(path, policy, algo: str, obs_rms=None, clip_obs: float = 10.0,
         "env": {"id": env_id, "kwargs": to_jsonable(env_kwargs or {})},
         "training": to_jsonable(training or {}),
         "hybrid": hybrid,
+        "features": features,
         "versions": _versions(),
     }
     text = json.dumps(meta, indent=1, allow_nan=False)
@@ -349,6 +359,14 @@ def load_agent(path):
             raise AgentLoadError(str(exc)) from None
     else:
         meta["hybrid"] = None
+    if meta.get("features") is not None:
+        try:
+            meta["features"] = FeatureSpec.from_dict(meta["features"],
+                                                     f"{meta_path}: features").to_dict()
+        except ValueError as exc:
+            raise AgentLoadError(str(exc)) from None
+    else:
+        meta["features"] = None
     norm = meta["obs_normalization"]
     if norm is not None:
         need = ("mean", "var", "clip_obs", "epsilon")
@@ -476,6 +494,23 @@ def run_hybrid(config: dict) -> dict | None:
         raise AgentLoadError(str(exc)) from None
 
 
+def run_features(config: dict) -> dict | None:
+    """The input features of a run from its ``config.yml`` (its ``features`` hyperparameter).
+
+    Raises
+    ------
+    AgentLoadError
+        If the recorded ``features`` is not a valid FeatureSpec.
+    """
+    value = (config.get("hyperparams") or {}).get("features")
+    if value is None:
+        return None
+    try:
+        return FeatureSpec.from_dict(value, "config.yml: hyperparams.features").to_dict()
+    except ValueError as exc:
+        raise AgentLoadError(str(exc)) from None
+
+
 def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
     """Convert a stable-baselines3 run folder (pickles) to a safe agent folder.
 
@@ -506,7 +541,7 @@ def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
                 "command": train_info.get("command")}
     return save_agent(out, model.policy, info["algo"], obs_rms, clip_obs, epsilon,
                       env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
-                      training=training, hybrid=run_hybrid(cfg))
+                      training=training, hybrid=run_hybrid(cfg), features=run_features(cfg))
 
 
 _SEED_DIR = re.compile(r"seed_(\d+)\Z")

@@ -26,9 +26,11 @@ from .agent_files import (
     is_unit,
     load_agent,
     load_pickled_run,
+    run_features,
     run_hybrid,
     seed_runs,
 )
+from .features import FeatureSpec, add_features
 from .mlp import NumpyMLP
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
@@ -103,12 +105,15 @@ class TrainedAgent:
         ``{"base", "scale", "filter"}`` when the policy is the residual of a hybrid
         (it then acts only through :class:`~tether_gym_agents.hybrid.ResidualPolicy`),
         None for a policy that acts alone.
+    features : FeatureSpec or None
+        The input features the policy appends to each observation before it is
+        normalised (:mod:`tether_gym_agents.features`); None: the observation alone.
     """
 
     def __init__(self, model, obs_rms=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
                  name: str = "agent", algo: str | None = None, env_id: str | None = None,
                  env_kwargs: dict | None = None, path: Path | None = None,
-                 hybrid: dict | None = None):
+                 hybrid: dict | None = None, features: dict | None = None):
         self.model = model
         self.obs_rms = obs_rms
         self.clip_obs = clip_obs
@@ -119,6 +124,8 @@ class TrainedAgent:
         self.env_kwargs = dict(env_kwargs or {})
         self.path = path
         self.hybrid = dict(hybrid) if hybrid is not None else None
+        self.features = (FeatureSpec.from_dict(features, "features") if features is not None
+                         else None)
         model.set_training_mode(False)  # once here, not on every predict
         self.mlp = NumpyMLP.from_policy(model)
         """The batch-invariant float64 forward pass of the deterministic action
@@ -131,7 +138,7 @@ class TrainedAgent:
 
     @property
     def observation_space(self):
-        """The observation space the agent was trained on."""
+        """The observation space of the policy's network (with its :attr:`features`)."""
         return self.model.observation_space
 
     @property
@@ -177,7 +184,7 @@ class TrainedAgent:
                        float(norm["epsilon"]) if norm else 1e-8,
                        name=f"{meta['algo']}:{label}", algo=meta["algo"],
                        env_id=meta["env"].get("id"), env_kwargs=meta["env"].get("kwargs"),
-                       path=unit, hybrid=meta["hybrid"])
+                       path=unit, hybrid=meta["hybrid"], features=meta["features"])
         if path.is_file() and path.suffix not in (".zip", ".pkl"):
             raise AgentLoadError(f"{path} is not an agent file: give an agent folder "
                                  f"({AGENT_FILE} + {WEIGHTS_FILE}) or a run folder")
@@ -190,7 +197,7 @@ class TrainedAgent:
         return cls(model.policy, obs_rms, clip_obs, epsilon,
                    name=f"{info['algo']}:{info['run_dir'].name}", algo=info["algo"],
                    env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
-                   path=info["run_dir"], hybrid=run_hybrid(cfg))
+                   path=info["run_dir"], hybrid=run_hybrid(cfg), features=run_features(cfg))
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """Observations as the policy saw them in training (VecNormalize's formula)."""
@@ -202,8 +209,9 @@ class TrainedAgent:
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         """stable-baselines3's ``predict`` for one observation or a batch: (action, state).
 
-        The same computation as ``BasePolicy.predict``: normalise, forward pass, unscale a
-        squashed action or clip it to the box. Deterministic actions of a plain MLP come
+        The same computation as ``BasePolicy.predict``, after appending the agent's
+        :attr:`features` (if any): normalise, forward pass, unscale a squashed action or
+        clip it to the box. Deterministic actions of a plain MLP come
         from the float64 NumPy forward pass (:attr:`mlp`), so each row of a batch is
         bitwise what it would be alone; otherwise torch's forward pass runs without
         SB3's per-call set-up.
@@ -211,10 +219,13 @@ class TrainedAgent:
         import torch
 
         obs = np.asarray(observation, dtype=np.float32)
+        if self.features is not None:
+            obs = add_features(self.features, obs, self.model.action_space.shape[0])
         expected = self.model.observation_space.shape
         if obs.shape[-len(expected):] != expected or obs.ndim > len(expected) + 1:
             raise ValueError(f"observation of shape {obs.shape} does not fit this agent "
-                             f"(trained on observations of shape {expected})")
+                             f"(trained on observations of shape {expected}"
+                             + (", its features included)" if self.features else ")"))
         single = obs.ndim == len(expected)
         batch = self.normalize(obs).reshape((-1, *expected))
         if deterministic and self.mlp is not None:

@@ -36,16 +36,17 @@ import tether_gym
 
 from .agent_files import save_agent, seed_runs
 from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
+from .features import FeatureSpec
 from .jsonio import to_jsonable
 from .residual_spec import ResidualSpec
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
-           "residual_spec", "plot_learning_curve", "plot_seed_learning_curves", "ConfigError",
-           "CONFIG_DIR"]
+           "residual_spec", "feature_spec", "plot_learning_curve", "plot_seed_learning_curves",
+           "ConfigError", "CONFIG_DIR"]
 
 CONFIG_DIR = Path(__file__).resolve().parent / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
-            "checkpoint_freq", "residual")
+            "checkpoint_freq", "residual", "features")
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
 SEED_MAX = 2**31 - 1
 PROGRESS_EVERY_S = 30.0
@@ -160,6 +161,8 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
             _check_schedule(key, params[key], str(path))
     if "residual" in params:
         residual_spec(params["residual"], str(path))
+    if "features" in params:
+        feature_spec(params["features"], str(path))
     return params
 
 
@@ -178,6 +181,21 @@ def residual_spec(value, source: str) -> ResidualSpec | None:
         return None
     try:
         return ResidualSpec.from_dict(value, f"{source}: residual")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def feature_spec(value, source: str) -> FeatureSpec | None:
+    """The validated ``features`` key of a config (None: the observation alone).
+
+    ``features: {name: symlog_errors, scale: 0.001}`` makes the policy's network see
+    symlog(e / S) and symlog(e' / S) beside the observation
+    (:mod:`tether_gym_agents.features`).
+    """
+    if value is None:
+        return None
+    try:
+        return FeatureSpec.from_dict(value, f"{source}: features")
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
 
@@ -593,7 +611,7 @@ def _callbacks(eval_env, out: Path, args, eval_freq: int, ckpt_freq: int, n_envs
                    epsilon=norm.epsilon if norm is not None else 1e-8,
                    env_id=agent_meta["env_id"], env_kwargs=agent_meta["env_kwargs"],
                    training={**agent_meta["training"], "num_timesteps": int(model.num_timesteps)},
-                   hybrid=agent_meta["hybrid"])
+                   hybrid=agent_meta["hybrid"], features=agent_meta["features"])
 
     class RunEvalCallback(EvalCallback):
         """EvalCallback that also writes the best agent (safe format).
@@ -656,11 +674,13 @@ def _write_info(out: Path, info: dict) -> None:
     tmp.replace(out / "train_info.json")
 
 
-def _make_venv(env_id, n_envs, seed, env_kwargs, residual: ResidualSpec | None = None):
+def _make_venv(env_id, n_envs, seed, env_kwargs, residual: ResidualSpec | None = None,
+               features: FeatureSpec | None = None):
     """The (monitored) training or evaluation vec env; the hybrid's when ``residual``.
 
     The residual wrapper sits below ``VecNormalize`` (added by the caller): its base
-    law and filter read raw observations.
+    law and filter read raw observations. The policy's input ``features`` are appended
+    above it, also below ``VecNormalize``.
     """
     from stable_baselines3.common.vec_env import VecEnv, VecMonitor
 
@@ -677,6 +697,10 @@ def _make_venv(env_id, n_envs, seed, env_kwargs, residual: ResidualSpec | None =
         from .residual_env import ResidualVecEnv
 
         venv = ResidualVecEnv.from_spec(venv, residual)
+    if features is not None:
+        from .vec_env import FeatureVecEnv
+
+        venv = FeatureVecEnv(venv, features)
     return VecMonitor(venv)
 
 
@@ -728,6 +752,10 @@ def _resolve(args) -> dict:
     if residual is not None and args.env_id != tether_gym.ENV_ID:
         raise ConfigError(f"{source}: residual needs --env-id {tether_gym.ENV_ID} (the base law "
                           f"and filter are built for it), got {args.env_id!r}")
+    features = feature_spec(run.get("features"), source)
+    if features is not None and args.env_id != tether_gym.ENV_ID:
+        raise ConfigError(f"{source}: features need --env-id {tether_gym.ENV_ID} (they read "
+                          f"its observation), got {args.env_id!r}")
     env_kwargs = _rate_mode_for(residual, env_kwargs, source, notes)
     _check_env(args.env_id, env_kwargs, args.env_kwargs, source)
     n_envs = args.n_envs if args.n_envs is not None else int(run.get("n_envs", 1))
@@ -740,8 +768,10 @@ def _resolve(args) -> dict:
     _check_out(out)
     if residual is not None:
         run["residual"] = residual.to_dict()
+    if features is not None:
+        run["features"] = features.to_dict()
     return {"out": out, "params": params, "run": run, "env_kwargs": env_kwargs, "notes": notes,
-            "residual": residual, "n_envs": n_envs, "timesteps": timesteps,
+            "residual": residual, "features": features, "n_envs": n_envs, "timesteps": timesteps,
             "eval_freq": eval_freq, "ckpt_freq": ckpt_freq, "source": source}
 
 
@@ -762,9 +792,9 @@ def _train(args, argv) -> int:
     gamma = params.get("gamma", 0.99)
     tb_log = str(out / "tb")
 
-    residual = cfg["residual"]
-    venv = _make_venv(args.env_id, n_envs, args.seed, env_kwargs, residual)
-    eval_env = _make_venv(args.env_id, 1, args.seed + 10_000, env_kwargs, residual)
+    residual, features = cfg["residual"], cfg["features"]
+    venv = _make_venv(args.env_id, n_envs, args.seed, env_kwargs, residual, features)
+    eval_env = _make_venv(args.env_id, 1, args.seed + 10_000, env_kwargs, residual, features)
     if residual is not None:
         print(f"  residual hybrid: {json.dumps(residual.to_dict())}: the agent learns a in "
               "u = filter(clip(u_smc + scale * a, -1, 1))")
@@ -805,7 +835,8 @@ def _train(args, argv) -> int:
                  "tether_gym": tether_gym.__version__}
     agent_meta = {"algo": args.algo, "env_id": args.env_id, "env_kwargs": env_kwargs,
                   "training": {"seed": args.seed, "command": command},
-                  "hybrid": residual.to_dict() if residual is not None else None}
+                  "hybrid": residual.to_dict() if residual is not None else None,
+                  "features": features.to_dict() if features is not None else None}
     evaluator, checkpoints, progress, save_safe = _callbacks(
         eval_env, out, args, cfg["eval_freq"], cfg["ckpt_freq"], n_envs, agent_meta, info_base,
         float(previous.get("wall_time_s", 0.0)), hasattr(model, "replay_buffer"))

@@ -29,13 +29,15 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.monitor import Monitor
-from stable_baselines3.common.vec_env import VecEnv
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvStepReturn
 
 from tether_gym import ENV_ID
 from tether_gym.envs.vector import TetherLibrationVectorEnv
 
-__all__ = ["TetherSB3VecEnv", "make_sb3_vec_env"]
+from .features import FeatureSpec, add_features
+
+__all__ = ["TetherSB3VecEnv", "make_sb3_vec_env", "FeatureVecEnv"]
 
 # attributes whose native value is a per-sub-env tuple, or batched where SB3 wants one env's
 _PER_ENV = ("np_random", "np_random_seed")
@@ -263,3 +265,42 @@ def _rows(infos: dict[str, Any], mask: np.ndarray | None = None) -> list[dict[st
         value = infos[key] if mask is None else infos[key][mask]
         columns.append(value.tolist() if value.ndim == 1 else list(value))
     return [dict(zip(keys, values, strict=True)) for values in zip(*columns, strict=True)]
+
+
+class FeatureVecEnv(VecEnvWrapper):
+    """Appends a policy's input features (:mod:`tether_gym_agents.features`) to observations.
+
+    It sits below ``VecNormalize`` in training, so the features are normalised like the
+    observation, and it also extends each ``terminal_observation``.
+
+    Parameters
+    ----------
+    venv : VecEnv
+        A TetherLibration vec env (one action per tether).
+    spec : FeatureSpec
+        The features.
+    """
+
+    def __init__(self, venv: VecEnv, spec: FeatureSpec):
+        self.features = spec
+        space = venv.observation_space
+        if not isinstance(space, gym.spaces.Box) or venv.action_space.shape is None:
+            raise TypeError(f"FeatureVecEnv needs a TetherLibration vec env, got {venv!r}")
+        self.n_tethers = venv.action_space.shape[0]
+        extra = np.full(spec.size(self.n_tethers), -np.inf, dtype=np.float32)
+        super().__init__(venv, observation_space=gym.spaces.Box(
+            np.concatenate([space.low, extra]), np.concatenate([space.high, -extra]),
+            dtype=np.float32))
+
+    def reset(self) -> np.ndarray:
+        """Reset every sub-env; the observations with their features."""
+        return add_features(self.features, np.asarray(self.venv.reset()), self.n_tethers)
+
+    def step_wait(self) -> VecEnvStepReturn:
+        """The step's results; observations and terminal observations with their features."""
+        obs, rewards, dones, infos = self.venv.step_wait()
+        for info in infos:
+            if "terminal_observation" in info:
+                info["terminal_observation"] = add_features(
+                    self.features, info["terminal_observation"], self.n_tethers)
+        return add_features(self.features, np.asarray(obs), self.n_tethers), rewards, dones, infos
