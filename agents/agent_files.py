@@ -351,22 +351,9 @@ def load_agent(path):
         raise AgentLoadError(f"weights {weights} do not fit the policy in {meta_path}: "
                              f"{exc}") from None
     policy.set_training_mode(False)
-    if meta.get("hybrid") is not None:
-        try:
-            spec = ResidualSpec.from_dict(meta["hybrid"], f"{meta_path}: hybrid")
-            meta["hybrid"] = spec.to_dict()
-        except ValueError as exc:
-            raise AgentLoadError(str(exc)) from None
-    else:
-        meta["hybrid"] = None
-    if meta.get("features") is not None:
-        try:
-            meta["features"] = FeatureSpec.from_dict(meta["features"],
-                                                     f"{meta_path}: features").to_dict()
-        except ValueError as exc:
-            raise AgentLoadError(str(exc)) from None
-    else:
-        meta["features"] = None
+    meta["hybrid"] = _recorded_spec(ResidualSpec, meta.get("hybrid"), f"{meta_path}: hybrid")
+    meta["features"] = _recorded_spec(FeatureSpec, meta.get("features"),
+                                      f"{meta_path}: features")
     norm = meta["obs_normalization"]
     if norm is not None:
         need = ("mean", "var", "clip_obs", "epsilon")
@@ -485,13 +472,8 @@ def run_hybrid(config: dict) -> dict | None:
     AgentLoadError
         If the recorded ``residual`` is not a valid ResidualSpec.
     """
-    value = (config.get("hyperparams") or {}).get("residual")
-    if value is None:
-        return None
-    try:
-        return ResidualSpec.from_dict(value, "config.yml: hyperparams.residual").to_dict()
-    except ValueError as exc:
-        raise AgentLoadError(str(exc)) from None
+    return _recorded_spec(ResidualSpec, (config.get("hyperparams") or {}).get("residual"),
+                          "config.yml: hyperparams.residual")
 
 
 def run_features(config: dict) -> dict | None:
@@ -502,11 +484,16 @@ def run_features(config: dict) -> dict | None:
     AgentLoadError
         If the recorded ``features`` is not a valid FeatureSpec.
     """
-    value = (config.get("hyperparams") or {}).get("features")
+    return _recorded_spec(FeatureSpec, (config.get("hyperparams") or {}).get("features"),
+                          "config.yml: hyperparams.features")
+
+
+def _recorded_spec(cls, value, what: str) -> dict | None:
+    """``cls.from_dict(value).to_dict()``, None for None; a bad value is an AgentLoadError."""
     if value is None:
         return None
     try:
-        return FeatureSpec.from_dict(value, "config.yml: hyperparams.features").to_dict()
+        return cls.from_dict(value, what).to_dict()
     except ValueError as exc:
         raise AgentLoadError(str(exc)) from None
 

@@ -31,6 +31,8 @@ import numpy as np
 
 from tether_gym.envs.layout import OBSERVATION
 
+from .jsonio import checked_mapping
+
 __all__ = ["FeatureSpec", "FEATURE_SETS", "add_features"]
 
 FEATURE_SETS = ("symlog_errors",)
@@ -64,12 +66,7 @@ class FeatureSpec:
             For a non-mapping, an unknown key or a bad value; the message names ``what``,
             the key and the valid keys or values.
         """
-        if not isinstance(data, dict):
-            raise ValueError(f"{what} must be a mapping with keys {list(cls.KEYS)}, got "
-                             f"{data!r}")
-        unknown = sorted(str(k) for k in set(data) - set(cls.KEYS))
-        if unknown:
-            raise ValueError(f"{what}: unknown key(s) {unknown}; valid keys: {list(cls.KEYS)}")
+        data = checked_mapping(data, cls.KEYS, what)
         name = data.get("name")
         if name not in FEATURE_SETS:
             raise ValueError(f"{what}: name {name!r} is not one of {list(FEATURE_SETS)}")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["to_jsonable", "sha256_file"]
+__all__ = ["to_jsonable", "sha256_file", "checked_mapping"]
 
 
 def to_jsonable(x):
@@ -31,6 +31,22 @@ def to_jsonable(x):
     if isinstance(x, Path):
         return str(x)
     return x
+
+
+def checked_mapping(data, keys: tuple[str, ...], what: str) -> dict:
+    """``data`` if it is a mapping whose keys are among ``keys``.
+
+    Raises
+    ------
+    ValueError
+        For a non-mapping or an unknown key; the message names ``what`` and the valid keys.
+    """
+    if not isinstance(data, dict):
+        raise ValueError(f"{what} must be a mapping with keys {list(keys)}, got {data!r}")
+    unknown = sorted(str(k) for k in set(data) - set(keys))
+    if unknown:
+        raise ValueError(f"{what}: unknown key(s) {unknown}; valid keys: {list(keys)}")
+    return data
 
 
 def sha256_file(path: Path) -> str:

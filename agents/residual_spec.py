@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
+from .jsonio import checked_mapping
+
 __all__ = ["BaseLaw", "ResidualSpec", "DEFAULT_SCALE"]
 
 DEFAULT_SCALE = 0.2
@@ -55,12 +57,7 @@ class ResidualSpec:
             For a non-mapping, an unknown key or a bad value; the message names ``what``,
             the key and the valid keys or values.
         """
-        if not isinstance(data, dict):
-            raise ValueError(f"{what} must be a mapping with keys {list(cls.KEYS)}, got "
-                             f"{data!r}")
-        unknown = sorted(str(k) for k in set(data) - set(cls.KEYS))
-        if unknown:
-            raise ValueError(f"{what}: unknown key(s) {unknown}; valid keys: {list(cls.KEYS)}")
+        data = checked_mapping(data, cls.KEYS, what)
         valid_bases = [b.value for b in BaseLaw]
         base = data.get("base", cls.base.value)
         if base not in valid_bases:

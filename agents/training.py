@@ -177,12 +177,7 @@ def residual_spec(value, source: str) -> ResidualSpec | None:
     ConfigError
         On an unknown key or value (the message names the valid ones).
     """
-    if value is None:
-        return None
-    try:
-        return ResidualSpec.from_dict(value, f"{source}: residual")
-    except ValueError as exc:
-        raise ConfigError(str(exc)) from None
+    return _config_spec(ResidualSpec, value, f"{source}: residual")
 
 
 def feature_spec(value, source: str) -> FeatureSpec | None:
@@ -192,10 +187,15 @@ def feature_spec(value, source: str) -> FeatureSpec | None:
     symlog(e / S) and symlog(e' / S) beside the observation
     (:mod:`tether_gym_agents.features`).
     """
+    return _config_spec(FeatureSpec, value, f"{source}: features")
+
+
+def _config_spec(cls, value, what: str):
+    """``cls.from_dict(value)``, None for None; a bad value is a ConfigError."""
     if value is None:
         return None
     try:
-        return FeatureSpec.from_dict(value, f"{source}: features")
+        return cls.from_dict(value, what)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
 
