@@ -13,8 +13,10 @@ from tether_gym_agents.agent_files import AGENT_FILE, load_agent
 from tether_gym_agents.evaluation import make_policy, resolve_policy
 from tether_gym_agents.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
 
-SHIPPED = {"ppo": "rl", "smc_residual": "hybrid"}
+SHIPPED = {"ppo": "rl", "ppo_symlog": "rl", "smc_residual": "hybrid"}
 """Policies the package ships (each a folder of seed_K runs) and their kind."""
+FEATURES = {"ppo_symlog": {"name": "symlog_errors", "scale": 0.01}}
+"""The input features of the shipped policies that have any."""
 RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
              "eval/evaluations.npz")
 
@@ -36,6 +38,7 @@ def test_every_run_is_complete_and_acts_on_the_current_env(name):
         _, meta = load_agent(run)
         assert meta["algo"] == "ppo" and meta["env"]["id"] == tether_gym.ENV_ID
         assert (meta.get("hybrid") is not None) == (SHIPPED[name] == "hybrid")
+        assert meta["features"] == FEATURES.get(name)
         info = json.loads((run / "train_info.json").read_text())
         assert info["num_timesteps"] > 0
     env = gym.make(tether_gym.ENV_ID, **spec.env_kwargs)
