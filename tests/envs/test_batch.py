@@ -94,9 +94,9 @@ def test_step_draws_are_each_rows_uniform_then_normal(rows):
 
 
 @pytest.mark.parametrize("kwargs", [{}, RANDOMISED])
-def test_drawn_start_equals_the_start_built_field_by_field(kwargs):
-    # options={"nu": the configured nu(0)} take the general path (fields one by one,
-    # the same draws); no options the path that draws theta, theta', l in one sum
+def test_a_reset_at_the_configured_nu0_equals_a_reset_without_options(kwargs):
+    # options={"nu": the configured nu(0)} go through the option handling (Eq. 10 and
+    # theta_d' at an explicit nu(0)) but fix nothing: the same draws, the same start
     config = EnvConfig.from_kwargs(**{"n_bodies": 4, **kwargs})
     fast, general = ChainBatch(config, 4), ChainBatch(config, 4)
     fast.reset_rows([0, 2, 3], [np.random.default_rng(7 + b) for b in range(4)])

@@ -147,11 +147,7 @@ class StartPlan(NamedTuple):
     eccentricity_range: tuple | None
     mass_range: float | None
     obs_noise: float
-    init_theta_range: float
     init_dtheta_range: float
-    init_length_range: float
-    initial_theta: np.ndarray
-    initial_lengths: np.ndarray
     amplitude: float
     frequency: float
     nu0: float
@@ -160,7 +156,7 @@ class StartPlan(NamedTuple):
     eq10: tuple | None  # (num, den) of Eq. 10 at nu0 and the fixed e; None when e is drawn
     #   (or when a den is 0)
     episode_length: float
-    length_bounds: tuple
+    slices: dict  # STATE's slices for n tethers (the first three also index a start)
     start_base: np.ndarray  # (3n,) initial theta, theta_d'(nu0), initial lengths
     start_spread: np.ndarray  # (3n,) their init_*_range
     state_low: np.ndarray  # (4n,) a start state row must lie strictly inside these
@@ -197,9 +193,8 @@ class StartPlan(NamedTuple):
                   "dlength": (-np.inf, np.inf)}
         return cls(config.eccentricity, np.asarray(config.masses, dtype=float),
                    config.randomised, rnd.eccentricity_range, rnd.mass_range, rnd.obs_noise,
-                   rnd.init_theta_range, rnd.init_dtheta_range, rnd.init_length_range,
-                   theta0, lengths0, amplitude, frequency, nu0, ref, dref, eq10,
-                   config.episode_length, config.episode.length_bounds,
+                   rnd.init_dtheta_range, amplitude, frequency, nu0, ref, dref, eq10,
+                   config.episode_length, STATE.slices(n),
                    np.concatenate([theta0, dref * ones, lengths0]),
                    np.concatenate([rnd.init_theta_range * ones, rnd.init_dtheta_range * ones,
                                    rnd.init_length_range * ones]),
@@ -335,7 +330,7 @@ class ChainBatch:
 
     def _start_failure(self, b: int) -> str:
         """Why row b's initial state fails, in words."""
-        sl = STATE.slices(self.n)
+        sl = self._plan.slices
         y = self.rows.y[b]
         return (f"theta={y[sl['theta']].round(4).tolist()}, "
                 f"l={y[sl['length']].round(4).tolist()}, "
@@ -374,21 +369,20 @@ class ChainBatch:
             ref, dref = plan.ref, plan.dref
         else:
             ref, dref, _ = desired_libration(nu0, plan.amplitude, plan.frequency)
-        shape = (count, n)
-        if opts:
-            theta = (np.broadcast_to(opts["theta"], shape) if "theta" in opts else
-                     plan.initial_theta + unit[:, :n] * plan.init_theta_range)
-            dtheta = (np.broadcast_to(opts["dtheta"], shape) if "dtheta" in opts else
-                      dref + unit[:, n:2 * n] * plan.init_dtheta_range)
-            length = (np.broadcast_to(opts["length"], shape) if "length" in opts else
-                      plan.initial_lengths + unit[:, 2 * n:] * plan.init_length_range)
-        else:  # the same sums, for theta, theta' and l at once
-            drawn = plan.start_base + unit * plan.start_spread
-            length = drawn[:, 2 * n:]
+        # theta, theta', l (STATE's first three fields, in its order: StartPlan.of checks
+        # it) from the draws, then what the options fix
+        sl = plan.slices
+        start = plan.start_base + unit * plan.start_spread
+        if "dtheta" not in opts and not at_plan:  # theta_d' at another nu(0)
+            start[:, sl["dtheta"]] = dref + unit[:, sl["dtheta"]] * plan.init_dtheta_range
+        for name in ("theta", "dtheta", "length"):
+            if name in opts:
+                start[:, sl[name]] = opts[name]
+        length = start[:, sl["length"]]
         # Reels start at the rate of the open-loop law (paper Eq. 10) on the reference
         # (infinite where theta_d' = -1: such a start is refused below)
         if "dlength" in opts:
-            dlength = np.broadcast_to(opts["dlength"], shape)
+            dlength = np.broadcast_to(opts["dlength"], (count, n))
         elif at_plan and plan.eq10 is not None:  # periodic_reel_rate's last line
             num, den = plan.eq10  # den != 0 (StartPlan.of)
             dlength = length * num / den
@@ -398,11 +392,7 @@ class ChainBatch:
                                              plan.amplitude, plan.frequency)
         r.nu[rows] = nu0
         r.nu_end[rows] = nu0 + plan.episode_length
-        if opts:
-            fields = {"theta": theta, "dtheta": dtheta, "length": length, "dlength": dlength}
-            r.y[rows] = np.concatenate([fields[name] for name in STATE.names], axis=1)
-        else:  # STATE order (StartPlan.of checks it)
-            r.y[rows] = np.concatenate((drawn, dlength), axis=1)
+        r.y[rows] = np.concatenate((start, dlength), axis=1)
         r.failure[rows] = 0
         r.reward[rows] = 0.0
         r.components[rows] = 0.0
