@@ -8,9 +8,10 @@ one unit. The env is unchanged: the features are appended by a VecEnvWrapper bel
 VecNormalize in training, and by the same function in front of the agent at
 evaluation, so `train.py` and `evaluate.py` run in-process with two patches.
 
-(The probe ran with its own copy of these features; the same operations are now
-``tether_gym_agents.features``, which ``configs/ppo_symlog.yml`` turns on without
-patches: ``features: {name: symlog_errors, scale: 0.01}``.)
+(The probe ran with its own copy of the features and of the wrapper; the same
+operations are now ``tether_gym_agents.features`` and ``FeatureVecEnv``, used here,
+which ``configs/ppo_symlog.yml`` turns on without patches: ``features: {name:
+symlog_errors, scale: 0.01}``.)
 
     python experiments/issue12/symlog/symlog.py train --seed 0 --timesteps 1000000 --out R
     python experiments/issue12/symlog/symlog.py evaluate R [evaluate.py arguments]
@@ -26,47 +27,24 @@ import sys
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
-from stable_baselines3.common.vec_env import VecEnvWrapper  # noqa: E402
 
 from tether_gym_agents import evaluation, trained, training  # noqa: E402
 from tether_gym_agents.features import FeatureSpec, add_features  # noqa: E402
+from tether_gym_agents.vec_env import FeatureVecEnv  # noqa: E402
 
 SCALE = float(os.environ.get("SYMLOG_SCALE", "1e-3"))
 """S of symlog(e / S) [rad], [rad/rad] for e' (environment variable SYMLOG_SCALE)."""
 
 
-def features(obs: np.ndarray, n: int) -> np.ndarray:
-    """obs (..., D) followed by symlog(e / S) and symlog(e' / S) of each tether."""
-    return add_features(FeatureSpec("symlog_errors", SCALE), obs, n)
-
-
-class SymlogFeatures(VecEnvWrapper):
-    """Appends the symlog error features to a TetherLibration vec env's observations."""
-
-    def __init__(self, venv):
-        self.n = venv.unwrapped.config.n_tethers
-        space = venv.observation_space
-        low = np.concatenate([space.low, np.full(2 * self.n, -np.inf, np.float32)])
-        super().__init__(venv, observation_space=gym.spaces.Box(low, -low, dtype=np.float32))
-
-    def reset(self):
-        return features(self.venv.reset(), self.n)
-
-    def step_wait(self):
-        obs, rew, done, infos = self.venv.step_wait()
-        for info in infos:
-            if "terminal_observation" in info:
-                info["terminal_observation"] = features(info["terminal_observation"], self.n)
-        return features(obs, self.n), rew, done, infos
+SPEC = FeatureSpec("symlog_errors", SCALE)
 
 
 def _patch_training() -> None:
     make = training._make_venv
 
     def make_venv(*args, **kwargs):
-        return SymlogFeatures(make(*args, **kwargs))
+        return FeatureVecEnv(make(*args, **kwargs), SPEC)
 
     training._make_venv = make_venv
 
@@ -79,7 +57,7 @@ def _patch_agent() -> None:
         want = self.model.observation_space.shape[0]
         if obs.shape[-1] != want:
             n = (want - obs.shape[-1]) // 2
-            obs = features(obs, n)
+            obs = add_features(SPEC, obs, n)
         return predict(self, obs, state, episode_start, deterministic)
 
     trained.TrainedAgent.predict = patched
