@@ -32,6 +32,10 @@ def main(argv: list[str] | None = None) -> int:
     results = json.loads(path.read_text())
     episodes = results["episodes"]
     reference = {(e["scenario"], e["seed"]): e for e in episodes if e["policy"] == REFERENCE}
+    if not reference:
+        print(f"{path} holds no episodes of {REFERENCE!r}: evaluate it beside the policies "
+              f"(python evaluate.py ... {REFERENCE})", file=sys.stderr)
+        return 2
     ref_ok = [e["reel_effort"] for e in reference.values() if e["success"]]
     print(f"{path}: {REFERENCE} effort, mean over all {len(reference)} episodes "
           f"{np.mean([e['reel_effort'] for e in reference.values()]):.3f}, over its "
