@@ -21,7 +21,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from scipy.stats import trim_mean
+
+from tether_gym_agents.stats import iqm, run_scores
 
 REFERENCE = "smc"
 
@@ -65,24 +66,18 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def print_per_run(results: dict) -> None:
-    """Per run: IQM over scenarios of the scenario means (RMS over survivors, NaN left out)."""
+    """Per run: IQM over scenarios of the scenario means (``evaluate.py``'s own helpers)."""
     for name, policy in results["policies"].items():
         if policy["n_runs"] < 2:
             continue
         print(f"\n{name}, per training run: tracking RMS [rad] / effort / failed episodes")
-        cells = []
-        for run in range(policy["n_runs"]):
-            episodes = [e for e in results["episodes"] if e["policy"] == name and e["run"] == run]
-            rms, effort = [], []
-            for scenario in results["scenarios"]:
-                here = [e for e in episodes if e["scenario"] == scenario]
-                values = [e["tracking_rms"] for e in here if e["tracking_rms"] is not None]
-                if values:
-                    rms.append(np.mean(values))
-                effort.append(np.mean([e["reel_effort"] for e in here]))
-            failed = sum(1 for e in episodes if not e["success"])
-            cells.append(f"{run}: {trim_mean(rms, 0.25):.2e} / "
-                         f"{trim_mean(effort, 0.25):.2f} / {failed}")
+        episodes = [e for e in results["episodes"] if e["policy"] == name]
+        runs = list(range(policy["n_runs"]))
+        rms, effort = (run_scores(episodes, metric, runs, results["scenarios"])
+                       for metric in ("tracking_rms", "reel_effort"))
+        cells = [f"{run}: {iqm(rms[run]):.2e} / {iqm(effort[run]):.2f} / "
+                 f"{sum(1 for e in episodes if e['run'] == run and not e['success'])}"
+                 for run in runs]
         print("; ".join(cells))
 
 
