@@ -2,6 +2,6 @@
 (``python evaluate.py paper --out DIR``): ``python evaluate.py -h``."""
 import sys
 
-from tether_gym_agents.evaluation import main
+from tether_gym_agents.cli.evaluate import main
 
 sys.exit(main())

@@ -5,9 +5,9 @@ The repository keeps this package in ``agents/``; it is installed under the name
 packages. ``tether_gym`` itself never imports it.
 """
 
-from .obs import ObservationLayout, ReelRatePolicy
-from .open_loop import AngleSource, PeriodicReel, RandomPolicy, ZeroStateReel
-from .smc import SlidingModeController
+from .baselines.open_loop import AngleSource, PeriodicReel, RandomPolicy, ZeroStateReel
+from .baselines.smc import SlidingModeController
+from .common.obs import ObservationLayout, ReelRatePolicy
 
 __all__ = [
     "SlidingModeController",

@@ -92,7 +92,7 @@ def ppo_figures(num_envs: int, n_steps: int, timesteps: int) -> dict:
     import torch
     from stable_baselines3 import PPO
 
-    from tether_gym_agents.vec_env import make_sb3_vec_env
+    from tether_gym_agents.training.vec_env import make_sb3_vec_env
 
     torch.set_num_threads(1)
     venv = make_sb3_vec_env(num_envs, seed=0)

@@ -9,14 +9,14 @@ difference, the table checks that explanation with its own run.
 
 Studies and settings
 --------------------
-* Zero state (Figs. 2-4): Eq. 7 (:class:`~tether_gym_agents.open_loop.ZeroStateReel`)
+* Zero state (Figs. 2-4): Eq. 7 (:class:`~tether_gym_agents.baselines.open_loop.ZeroStateReel`)
   from theta = theta' = 0 (reference amplitude 0), Table 1, 3 orbits.
 * Periodic solutions (Fig. 5, e = 0.2, A = 0.1, 0.2, 0.3; Fig. 6, e = 0.7,
   p = 7100 (1 + e) km, A = 0.5 ... 0.9): Eq. 10 on the reference
-  (:class:`~tether_gym_agents.open_loop.PeriodicReel`) from theta = 0, theta' = A.
+  (:class:`~tether_gym_agents.baselines.open_loop.PeriodicReel`) from theta = 0, theta' = A.
 * Swing minimiser (Eq. 11b) and the tension-positivity polynomial (Sec. 3.2): scans of
   the same open-loop runs over A and e.
-* Sliding mode (Figs. 7-9): :class:`~tether_gym_agents.smc.SlidingModeController`
+* Sliding mode (Figs. 7-9): :class:`~tether_gym_agents.baselines.smc.SlidingModeController`
   (c = k = 1, eps = 0.1) from the Sec. 4.3 state with the 0.01 m/s^2 reel
   acceleration limit (L0 = 20 km), once at the paper's step (control step = RK4 step
   = 0.001 rad, reel lag 0.001 rad, close to the paper's ideal reel with a
@@ -45,7 +45,7 @@ Definitions used in the table
   per orbit (see :func:`chattering`).
 """
 
-from ..rollout import Trajectory, rollout
+from ..evaluation.rollout import Trajectory, rollout
 from .cli import main, reproduce
 from .measures import chattering, convergence_orbits, swing
 from .settings import DEFAULT_SMC_SETTINGS, OPEN_LOOP_SETTINGS, PAPER_SMC_SETTINGS

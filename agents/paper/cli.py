@@ -16,7 +16,7 @@ from tether_gym.tasks.reference import (
     periodic_reel_rate,
 )
 
-from ..jsonio import to_jsonable
+from ..common.jsonio import to_jsonable
 from .figures import _draw, _figure_class
 from .measures import smc_metrics, swing
 from .runs import make_env, run_periodic, run_smc

@@ -1,7 +1,7 @@
 """Paper reproduction: metrics (pure functions of recorded trajectories).
 
 The numbers the benchmark also reports (convergence time, RMS error after orbit 1,
-minimum tension) come from :func:`tether_gym_agents.metrics.episode_metrics`, the one
+minimum tension) come from :func:`tether_gym_agents.evaluation.metrics.episode_metrics`, the one
 definition shared with ``evaluate.py``; this module adds the paper table's own measures.
 """
 
@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from ..metrics import after_first_orbit, convergence_orbits, episode_metrics
-from ..rollout import Trajectory
+from ..evaluation.metrics import after_first_orbit, convergence_orbits, episode_metrics
+from ..evaluation.rollout import Trajectory
 
 __all__ = ["swing", "chattering", "smc_metrics", "convergence_orbits"]
 
@@ -73,7 +73,7 @@ def smc_metrics(traj: Trajectory) -> dict:
 
     ``convergence_orbits``, ``rms_error_after_orbit_1`` and ``min_tension`` are the
     benchmark's ``converge_orbits``, ``tracking_rms`` and ``min_tension``
-    (:func:`~tether_gym_agents.metrics.episode_metrics`), None where undefined.
+    (:func:`~tether_gym_agents.evaluation.metrics.episode_metrics`), None where undefined.
     """
     bench = episode_metrics(traj)
 

@@ -1,8 +1,9 @@
 """Paper reproduction: rollouts, through the benchmark's rollout path.
 
-Every study runs one episode of a baseline with :func:`tether_gym_agents.rollout.rollout`
+Every study runs one episode of a baseline with :func:`tether_gym_agents.evaluation.rollout.rollout`
 on a one-env native vector env whose only time limit is the configured number of orbits
-(``max_episode_steps=-1``), and keeps the whole :class:`~tether_gym_agents.rollout.Trajectory`.
+(``max_episode_steps=-1``), and keeps the whole
+:class:`~tether_gym_agents.evaluation.rollout.Trajectory`.
 """
 
 from __future__ import annotations
@@ -11,10 +12,10 @@ import gymnasium as gym
 
 import tether_gym
 
-from ..obs import ReelRatePolicy
-from ..open_loop import PeriodicReel, ZeroStateReel
-from ..rollout import Trajectory, make_vector_env, rollout
-from ..smc import SlidingModeController
+from ..baselines.open_loop import PeriodicReel, ZeroStateReel
+from ..baselines.smc import SlidingModeController
+from ..common.obs import ReelRatePolicy
+from ..evaluation.rollout import Trajectory, make_vector_env, rollout
 from .settings import OPEN_LOOP_SETTINGS
 
 __all__ = ["Trajectory", "make_env", "run_episode", "run_zero_state", "run_periodic",

@@ -1,6 +1,6 @@
 """Reel effort of each policy against SMC's on the episodes that both survive.
 
-The benchmark's reel effort (``agents/metrics.py``) integrates |l_i'| over an episode,
+The benchmark's reel effort (``agents/evaluation/metrics.py``) integrates |l_i'| over an episode,
 so an episode that fails early spends less. SMC fails 14-18 of the default suite's 70
 episodes in its first-orbit transient, and those short episodes pull its IQM down.
 This script pairs every episode of a policy with SMC's episode of the same scenario and
@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tether_gym_agents.stats import iqm, run_scores
+from tether_gym_agents.evaluation.stats import iqm, run_scores
 
 REFERENCE = "smc"
 

@@ -19,11 +19,11 @@ import gymnasium as gym
 
 import tether_gym
 from tether_gym.safety import SafetyFilter
-from tether_gym_agents.evaluation import PolicyKind, PolicySpec
-from tether_gym_agents.hybrid import FilteredPolicy
-from tether_gym_agents.metrics import episode_metrics
-from tether_gym_agents.rollout import rollout
-from tether_gym_agents.scenarios import get_suite
+from tether_gym_agents.evaluation.benchmark import PolicyKind, PolicySpec
+from tether_gym_agents.evaluation.metrics import episode_metrics
+from tether_gym_agents.evaluation.rollout import rollout
+from tether_gym_agents.evaluation.scenarios import get_suite
+from tether_gym_agents.hybrids.policies import FilteredPolicy
 
 OUT = Path(__file__).resolve().parent / "filter_episodes.json"
 SEEDS = list(range(10))

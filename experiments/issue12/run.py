@@ -33,9 +33,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from wrappers import DESIGNS, TaskWrapper  # noqa: E402
 
 import tether_gym  # noqa: E402, F401
-from tether_gym_agents.metrics import episode_metrics  # noqa: E402
-from tether_gym_agents.scenarios import RANDOM_INIT, Scenario, get_suite  # noqa: E402
-from tether_gym_agents.vec_env import make_sb3_vec_env  # noqa: E402
+from tether_gym_agents.evaluation.metrics import episode_metrics  # noqa: E402
+from tether_gym_agents.evaluation.scenarios import RANDOM_INIT, Scenario, get_suite  # noqa: E402
+from tether_gym_agents.training.vec_env import make_sb3_vec_env  # noqa: E402
 
 TRAIN_KWARGS = {"initial_theta": (0.0, 0.0), "init_theta_range": 0.15, "init_dtheta_range": 0.1,
                 "eccentricity_range": (0.0, 0.35), "mass_range": 0.25, "observe_params": False,
@@ -110,7 +110,7 @@ def make_env(n_envs, seed, env_kwargs, design):
 def _trajectory(infos, rewards, nu0, cfg, truncated):
     """A rollout.Trajectory from the step infos (row 0: the first step's with nu = nu0;
     the metrics read rows 1.. and nu[0] only)."""
-    from tether_gym_agents.rollout import RECORDED_KEYS, Trajectory
+    from tether_gym_agents.evaluation.rollout import RECORDED_KEYS, Trajectory
 
     first = dict(infos[0], nu=nu0)
     arrays = {k: np.array([np.asarray(i[k], dtype=float) for i in [first] + infos])

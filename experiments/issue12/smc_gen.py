@@ -16,8 +16,8 @@ import torch  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from run import GEN_SUITE, strict  # noqa: E402
 
-from tether_gym_agents.evaluation import _run_scenario  # noqa: E402
-from tether_gym_agents.metrics import aggregate  # noqa: E402
+from tether_gym_agents.evaluation.benchmark import _run_scenario  # noqa: E402
+from tether_gym_agents.evaluation.metrics import aggregate  # noqa: E402
 
 torch.set_num_threads(1)
 out = {}

@@ -1,7 +1,7 @@
 """Candidate task changes of issue 12 as a stable-baselines3 VecEnvWrapper.
 
 Exploratory code for the ablation only (not part of the package). The wrapper sits
-directly on ``tether_gym_agents.vec_env.TetherSB3VecEnv`` (before VecMonitor and
+directly on ``tether_gym_agents.training.vec_env.TetherSB3VecEnv`` (before VecMonitor and
 VecNormalize) and recomputes the reward from the env's ``info`` (true state, not the
 noisy observation), changes the observation and, optionally, the action.
 

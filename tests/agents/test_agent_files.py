@@ -15,15 +15,15 @@ import torch
 import yaml
 
 import tether_gym
-from tether_gym_agents.agent_files import (
+from tether_gym_agents.evaluation.benchmark import main as evaluate_main
+from tether_gym_agents.files.agent_files import (
     AGENT_FILE,
     WEIGHTS_FILE,
     AgentLoadError,
     save_agent,
 )
-from tether_gym_agents.agent_files import main as agent_files_main
-from tether_gym_agents.evaluation import main as evaluate_main
-from tether_gym_agents.trained import TrainedAgent
+from tether_gym_agents.files.agent_files import main as agent_files_main
+from tether_gym_agents.files.trained import TrainedAgent
 
 DATA = os.path.join(os.path.dirname(__file__), "data")
 
@@ -115,7 +115,7 @@ def test_safe_files_round_trip_to_identical_actions(tmp_path, algo):
     obs = rng.normal(0.0, 1.0, size=(64, 20)).astype(np.float32)
     expected = model.predict(np.clip((obs - rms.mean) / np.sqrt(rms.var + 1e-8), -5, 5)
                              .astype(np.float32), deterministic=True)[0]
-    # the float64 NumPy forward pass (tether_gym_agents.mlp) agrees to float32 rounding,
+    # the float64 NumPy forward pass (tether_gym_agents.files.mlp) agrees to float32 rounding,
     # torch's own forward pass bit for bit
     np.testing.assert_allclose(agent.predict(obs)[0], expected, rtol=0, atol=2e-6)
     agent.mlp = None

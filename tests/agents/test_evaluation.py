@@ -11,11 +11,11 @@ import shutil
 import numpy as np
 import pytest
 
-from tether_gym_agents import evaluation
-from tether_gym_agents.metrics import METRICS
-from tether_gym_agents.rollout import Trajectory
-from tether_gym_agents.scenarios import SUITES, Scenario, get_suite
-from tether_gym_agents.trained import pretrained_agents
+from tether_gym_agents.evaluation import benchmark as evaluation
+from tether_gym_agents.evaluation.metrics import METRICS
+from tether_gym_agents.evaluation.rollout import Trajectory
+from tether_gym_agents.evaluation.scenarios import SUITES, Scenario, get_suite
+from tether_gym_agents.files.trained import pretrained_agents
 
 SHORT = ["--suite", "paper", "--env-kwargs", "orbits_per_episode=0.2"]
 SHORT_KWARGS = {"orbits_per_episode": 0.2}
@@ -252,7 +252,7 @@ def test_plots_mark_failures_title_the_scenario_and_skip_undefined(tmp_path, mon
     pytest.importorskip("matplotlib")
     from matplotlib.figure import Figure
 
-    from tether_gym_agents.eval_plots import plot_results
+    from tether_gym_agents.evaluation.plots import plot_results
 
     saved = []
     monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
@@ -277,7 +277,7 @@ def test_plots_mark_failures_title_the_scenario_and_skip_undefined(tmp_path, mon
 
 
 def test_env_kwargs_are_literals_never_code():
-    from tether_gym_agents.env_kwargs import parse_env_kwargs
+    from tether_gym_agents.common.env_kwargs import parse_env_kwargs
 
     parsed = parse_env_kwargs(["masses=(1,2.5)", "gravity=full", "obs_noise=1e-3",
                                "init_theta_range=None", "parallel=false"])
@@ -313,7 +313,7 @@ def test_an_agent_is_evaluated_with_the_observation_it_was_trained_on(tmp_path):
     """An agent trained seeing e (observe_params="eccentricity") gets e on every
     scenario, alone and inside its handover hybrid, whose law still designs on its
     own model."""
-    from tether_gym_agents import training
+    from tether_gym_agents.training import train as training
 
     run = tmp_path / "seeing_e"
     assert training.main(["--out", str(run), "--timesteps", "256", "--n-envs", "2",

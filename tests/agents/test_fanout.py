@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.fanout import RAY_PIP, RunState, run_state, seed_argv
-from tether_gym_agents.training import _build_parser, main
+from tether_gym_agents.training.fanout import RAY_PIP, RunState, run_state, seed_argv
+from tether_gym_agents.training.train import _build_parser, main
 
 # 2 envs x n_steps 128 (the tiny config): one PPO update per 256 steps, three in TARGET
 TINY = ["--n-envs", "2", "--eval-freq", "128", "--checkpoint-freq", "256", "--eval-episodes",

@@ -10,12 +10,12 @@ import pytest
 import yaml
 
 from tether_gym.envs.layout import OBSERVATION
-from tether_gym_agents.agent_files import AgentLoadError
-from tether_gym_agents.evaluation import main as evaluate_main
-from tether_gym_agents.features import FeatureSpec, add_features
-from tether_gym_agents.trained import TrainedAgent
-from tether_gym_agents.training import ConfigError, feature_spec, main
-from tether_gym_agents.vec_env import FeatureVecEnv, make_sb3_vec_env
+from tether_gym_agents.common.features import FeatureSpec, add_features
+from tether_gym_agents.evaluation.benchmark import main as evaluate_main
+from tether_gym_agents.files.agent_files import AgentLoadError
+from tether_gym_agents.files.trained import TrainedAgent
+from tether_gym_agents.training.train import ConfigError, feature_spec, main
+from tether_gym_agents.training.vec_env import FeatureVecEnv, make_sb3_vec_env
 
 TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
         "--eval-episodes", "1", "--env-kwargs", "orbits_per_episode=0.05"]

@@ -12,15 +12,15 @@ from stable_baselines3.common.monitor import Monitor
 import tether_gym
 from tether_gym.safety import SafetyFilter
 from tether_gym_agents import SlidingModeController
-from tether_gym_agents.hybrid import (
+from tether_gym_agents.common.obs import ObservationLayout
+from tether_gym_agents.evaluation.metrics import METRICS, episode_metrics
+from tether_gym_agents.evaluation.rollout import rollout
+from tether_gym_agents.hybrids.policies import (
     FilteredPolicy,
     HandoverPolicy,
     ResidualPolicy,
     state_from_observation,
 )
-from tether_gym_agents.metrics import METRICS, episode_metrics
-from tether_gym_agents.obs import ObservationLayout
-from tether_gym_agents.rollout import rollout
 
 SHORT = {"orbits_per_episode": 0.1, "action_mode": "rate"}
 

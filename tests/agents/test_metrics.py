@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from tether_gym_agents.metrics import METRICS, convergence_orbits, episode_metrics
-from tether_gym_agents.rollout import Trajectory
+from tether_gym_agents.evaluation.metrics import METRICS, convergence_orbits, episode_metrics
+from tether_gym_agents.evaluation.rollout import Trajectory
 
 STEP = 0.025
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.mlp import NumpyMLP
+from tether_gym_agents.files.mlp import NumpyMLP
 
 
 def _model(algo, **kwargs):

@@ -9,7 +9,8 @@ import sys
 import numpy as np
 import pytest
 
-from tether_gym_agents import evaluation, paper
+from tether_gym_agents import paper
+from tether_gym_agents.evaluation import benchmark as evaluation
 
 FIGURES = (
     "fig2_zero_state_angles.png",
@@ -71,11 +72,11 @@ def test_main_writes_figures_and_table(short_run):
 
 def test_paper_trajectories_come_from_the_benchmark_rollout():
     """The paper's sliding-mode run is the benchmark's rollout, metrics included."""
-    from tether_gym_agents.metrics import episode_metrics
+    from tether_gym_agents.baselines.smc import SlidingModeController
+    from tether_gym_agents.evaluation.metrics import episode_metrics
+    from tether_gym_agents.evaluation.rollout import make_vector_env, rollout
     from tether_gym_agents.paper.measures import smc_metrics
     from tether_gym_agents.paper.runs import run_smc
-    from tether_gym_agents.rollout import make_vector_env, rollout
-    from tether_gym_agents.smc import SlidingModeController
 
     traj = run_smc(0.3, {})
     venv = make_vector_env(1, {"orbits_per_episode": 0.3, "action_mode": "rate"})

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.obs import ObservationLayout
-from tether_gym_agents.rollout import RECORDED_KEYS, make_vector_env, rollout
-from tether_gym_agents.smc import SlidingModeController
+from tether_gym_agents.baselines.smc import SlidingModeController
+from tether_gym_agents.common.obs import ObservationLayout
+from tether_gym_agents.evaluation.rollout import RECORDED_KEYS, make_vector_env, rollout
 
 KWARGS = {"orbits_per_episode": 0.1, "initial_theta": (0.0, 0.0), "init_theta_range": 0.15,
           "init_dtheta_range": 0.1, "action_mode": "rate"}

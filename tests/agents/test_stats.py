@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy import stats as sps
 
-from tether_gym_agents.stats import (
+from tether_gym_agents.evaluation.stats import (
     bootstrap_iqm,
     iqm,
     probability_of_improvement,

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.sweep import (
+from tether_gym_agents.training.sweep import (
     Search,
     apply_overrides,
     expand_trials,
@@ -20,7 +20,7 @@ from tether_gym_agents.sweep import (
     rank_trials,
     write_table,
 )
-from tether_gym_agents.training import ConfigError, main
+from tether_gym_agents.training.train import ConfigError, main
 
 TINY = ["--n-envs", "2", "--eval-freq", "256", "--checkpoint-freq", "512", "--eval-episodes",
         "1", "--env-kwargs", "orbits_per_episode=0.05"]

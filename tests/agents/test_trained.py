@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.agent_files import AGENT_FILE, load_agent
-from tether_gym_agents.evaluation import make_policy, resolve_policy
-from tether_gym_agents.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
+from tether_gym_agents.evaluation.benchmark import make_policy, resolve_policy
+from tether_gym_agents.files.agent_files import AGENT_FILE, load_agent
+from tether_gym_agents.files.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
 
 SHIPPED = {"ppo": "rl", "ppo_symlog": "rl", "smc_residual": "hybrid"}
 """Policies the package ships (each a folder of seed_K runs) and their kind."""

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.evaluation import main as evaluate_main
-from tether_gym_agents.trained import TrainedAgent
-from tether_gym_agents.training import ConfigError, load_hyperparams, main, parse_env_kwargs
+from tether_gym_agents.evaluation.benchmark import main as evaluate_main
+from tether_gym_agents.files.trained import TrainedAgent
+from tether_gym_agents.training.train import ConfigError, load_hyperparams, main, parse_env_kwargs
 
 TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
         "--eval-episodes", "1", "--env-kwargs", "orbits_per_episode=0.05"]
@@ -129,7 +129,7 @@ def test_bad_env_kwarg_is_reported(tmp_path, capsys):
 
 
 def test_corrupt_or_missing_agent(tmp_path):
-    from tether_gym_agents.trained import AgentLoadError
+    from tether_gym_agents.files.trained import AgentLoadError
 
     with pytest.raises(AgentLoadError, match="does not exist"):
         TrainedAgent.load(tmp_path / "nope")
@@ -162,7 +162,7 @@ def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
 def test_seed_learning_curves(tmp_path):
     """One plot of every seed's evaluation curve; needs two runs with evaluations."""
     pytest.importorskip("matplotlib")
-    from tether_gym_agents.training import plot_seed_learning_curves
+    from tether_gym_agents.training.train import plot_seed_learning_curves
 
     steps = np.array([100, 200, 300])
     for k in range(3):

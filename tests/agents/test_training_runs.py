@@ -11,9 +11,9 @@ import pytest
 import yaml
 from stable_baselines3.common.callbacks import EvalCallback
 
-from tether_gym_agents import training
-from tether_gym_agents.trained import TrainedAgent
-from tether_gym_agents.training import ConfigError, main, resolve_env_kwargs
+from tether_gym_agents.files.trained import TrainedAgent
+from tether_gym_agents.training import train as training
+from tether_gym_agents.training.train import ConfigError, main, resolve_env_kwargs
 
 FAST = ["--n-envs", "2", "--no-progress", "--eval-episodes", "1"]
 SHORT = ["--env-kwargs", "orbits_per_episode=0.05"]
@@ -79,7 +79,7 @@ def test_user_env_kwargs_reach_the_run(tmp_path, capsys):
     assert agent.observation_space.shape == env.observation_space.shape != (12,)
     env.close()
     # the env the run trained on draws no e: every reset has e = 0.3
-    from tether_gym_agents.vec_env import make_sb3_vec_env
+    from tether_gym_agents.training.vec_env import make_sb3_vec_env
 
     venv = make_sb3_vec_env(4, seed=0, env_kwargs=env_kwargs)
     assert venv.config.eccentricity == 0.3 and venv.config.eccentricity_range is None

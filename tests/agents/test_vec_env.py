@@ -16,7 +16,7 @@ from stable_baselines3.common.monitor import Monitor  # noqa: E402
 from stable_baselines3.common.vec_env import VecEnv, VecMonitor, VecNormalize  # noqa: E402
 
 from tether_gym.envs import TetherLibrationEnv  # noqa: E402
-from tether_gym_agents.vec_env import TetherSB3VecEnv, make_sb3_vec_env  # noqa: E402
+from tether_gym_agents.training.vec_env import TetherSB3VecEnv, make_sb3_vec_env  # noqa: E402
 
 SHORT = {"orbits_per_episode": 0.05}  # 13 steps
 # action +1 pays out until the length leaves its bounds (terminated after 14 steps);

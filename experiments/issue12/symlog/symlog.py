@@ -9,7 +9,7 @@ VecNormalize in training, and by the same function in front of the agent at
 evaluation, so `train.py` and `evaluate.py` run in-process with two patches.
 
 (The probe ran with its own copy of the features and of the wrapper; the same
-operations are now ``tether_gym_agents.features`` and ``FeatureVecEnv``, used here,
+operations are now ``tether_gym_agents.common.features`` and ``FeatureVecEnv``, used here,
 which ``configs/ppo_symlog.yml`` turns on without patches: ``features: {name:
 symlog_errors, scale: 0.01}``.)
 
@@ -30,8 +30,8 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np  # noqa: E402
 
 from tether_gym_agents import evaluation, trained, training  # noqa: E402
-from tether_gym_agents.features import FeatureSpec, add_features  # noqa: E402
-from tether_gym_agents.vec_env import FeatureVecEnv  # noqa: E402
+from tether_gym_agents.common.features import FeatureSpec, add_features  # noqa: E402
+from tether_gym_agents.training.vec_env import FeatureVecEnv  # noqa: E402
 
 SCALE = float(os.environ.get("SYMLOG_SCALE", "1e-3"))
 """S of symlog(e / S) [rad], [rad/rad] for e' (environment variable SYMLOG_SCALE)."""

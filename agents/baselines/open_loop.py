@@ -31,7 +31,7 @@ from tether_gym.tasks.reference import (
     zero_state_reel_rate,
 )
 
-from .obs import ObservationLayout, ReelRatePolicy
+from ..common.obs import ObservationLayout, ReelRatePolicy
 
 __all__ = ["AngleSource", "ZeroStateReel", "PeriodicReel", "RandomPolicy"]
 

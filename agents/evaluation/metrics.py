@@ -1,6 +1,6 @@
 """Per-episode metrics of a libration-tracking rollout: the one definition of each.
 
-An episode is a :class:`~tether_gym_agents.rollout.Trajectory` (row 0: the reset state;
+An episode is a :class:`~tether_gym_agents.evaluation.rollout.Trajectory` (row 0: the reset state;
 rows 1..K: after every control step). Definitions (n tethers, steps k = 1..K, true
 anomaly nu_k counted from the reset, one orbit = 2 pi rad), on the step rows:
 
@@ -20,9 +20,9 @@ anomaly nu_k counted from the reset, one orbit = 2 pi rad), on the step rows:
 * ``filter_rate`` [-]: fraction of the steps whose action a safety filter changed; only
   for filtered policies (``traj.filter_active`` set), and not in :data:`METRICS`.
 
-The benchmark (:mod:`tether_gym_agents.evaluation`) and the paper reproduction
+The benchmark (:mod:`tether_gym_agents.evaluation.benchmark`) and the paper reproduction
 (:mod:`tether_gym_agents.paper`) both compute these from the same trajectories;
-statistics over episodes and training runs are in :mod:`tether_gym_agents.stats`.
+statistics over episodes and training runs are in :mod:`tether_gym_agents.evaluation.stats`.
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def episode_metrics(traj) -> dict:
     Parameters
     ----------
     traj : Trajectory
-        The recorded episode (:func:`tether_gym_agents.rollout.rollout`).
+        The recorded episode (:func:`tether_gym_agents.evaluation.rollout.rollout`).
 
     Returns
     -------

@@ -11,10 +11,10 @@ An agent is one folder (a *unit*) with two files:
     id and env kwargs the agent was trained on, the training seed and steps, the
     name and SHA-256 of the weights file, and ``hybrid``: ``null`` for a plain agent,
     ``{"base": "smc", "scale": ..., "filter": ...}`` for the residual of a hybrid
-    (:mod:`tether_gym_agents.residual_spec`; absent in older files, read as ``null``),
+    (:mod:`tether_gym_agents.hybrids.residual_spec`; absent in older files, read as ``null``),
     and ``features``: ``null``, or ``{"name": ..., "scale": ...}`` for a policy whose
     network also sees features computed from the observation
-    (:mod:`tether_gym_agents.features`; absent in older files, read as ``null``).
+    (:mod:`tether_gym_agents.common.features`; absent in older files, read as ``null``).
 ``policy.safetensors``
     The policy's ``state_dict`` in the safetensors format: a JSON header (names,
     dtypes, shapes, offsets) followed by raw tensor bytes. Reading it builds tensors
@@ -44,9 +44,9 @@ from typing import Any
 
 import numpy as np
 
-from .features import FeatureSpec
-from .jsonio import sha256_file, to_jsonable
-from .residual_spec import ResidualSpec
+from ..common.features import FeatureSpec
+from ..common.jsonio import sha256_file, to_jsonable
+from ..hybrids.residual_spec import ResidualSpec
 
 __all__ = ["AgentLoadError", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT", "FORMAT_VERSION",
            "save_agent", "load_agent", "load_pickled_run", "convert_run", "is_unit",
@@ -378,7 +378,7 @@ def _refuse(files) -> AgentLoadError:
     return AgentLoadError(
         f"refusing pickled agent files {[str(f) for f in files]}: loading them can run code "
         "from the file. Convert a run folder you trust once with `python -m "
-        "tether_gym_agents.agent_files convert RUN_DIR --allow-pickle`, or load it with "
+        "tether_gym_agents.files.agent_files convert RUN_DIR --allow-pickle`, or load it with "
         "allow_pickle=True (evaluate.py --allow-pickle)")
 
 
@@ -585,11 +585,11 @@ def export_runs(src, dest) -> list[Path]:
 
 
 def main(argv=None) -> int:
-    """``python -m tether_gym_agents.agent_files {convert,export} ...`` (see ``--help``)."""
+    """``python -m tether_gym_agents.files.agent_files {convert,export} ...`` (see ``--help``)."""
     import argparse
     import sys
 
-    parser = argparse.ArgumentParser(prog="python -m tether_gym_agents.agent_files",
+    parser = argparse.ArgumentParser(prog="python -m tether_gym_agents.files.agent_files",
                                      description="Convert a stable-baselines3 run folder "
                                                  "(pickles) to a safe agent folder.")
     sub = parser.add_subparsers(dest="cmd", required=True)

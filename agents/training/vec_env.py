@@ -11,7 +11,7 @@ which speaks SB3's protocol:
 * ``infos`` is a list of per-env dicts holding the env's documented ``info`` keys.
 
 Episode statistics for SB3's logger (``rollout/ep_rew_mean``): wrap the result in
-``VecMonitor`` (as ``agents/training.py`` does), or pass ``monitor=True`` to get
+``VecMonitor`` (as ``agents/training/train.py`` does), or pass ``monitor=True`` to get
 Monitor's ``infos[i]["episode"] = {"r": return, "l": length, "t": seconds}`` from the
 adapter itself; ``env_is_wrapped(Monitor)`` then answers True, so ``evaluate_policy``
 reads them and ``VecMonitor`` warns that it would count twice.
@@ -35,7 +35,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices, VecEnvS
 from tether_gym import ENV_ID
 from tether_gym.envs.vector import TetherLibrationVectorEnv
 
-from .features import FeatureSpec, add_features
+from ..common.features import FeatureSpec, add_features
 
 __all__ = ["TetherSB3VecEnv", "make_sb3_vec_env", "FeatureVecEnv"]
 
@@ -268,7 +268,7 @@ def _rows(infos: dict[str, Any], mask: np.ndarray | None = None) -> list[dict[st
 
 
 class FeatureVecEnv(VecEnvWrapper):
-    """Appends a policy's input features (:mod:`tether_gym_agents.features`) to observations.
+    """Appends a policy's input features (:mod:`tether_gym_agents.common.features`) to observations.
 
     It sits below ``VecNormalize`` in training, so the features are normalised like the
     observation, and it also extends each ``terminal_observation``.

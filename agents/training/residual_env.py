@@ -4,15 +4,16 @@ The hybrid commands
 
     u = filter(clip(u_base(obs) + scale * a_rl, -1, 1))
 
-with u_base the paper's sliding-mode law (:class:`~tether_gym_agents.smc.SlidingModeController`)
+with u_base the paper's sliding-mode law
+(:class:`~tether_gym_agents.baselines.smc.SlidingModeController`)
 designed on the env's *nominal* model, a_rl in [-1, 1]^n the learned residual and
 ``filter`` the optional model-based safety filter (:class:`tether_gym.safety.SafetyFilter`,
 predicting on the same nominal model). :class:`ResidualVecEnv` puts everything but a_rl
 inside a stable-baselines3 vector env, so PPO or SAC learn a_rl on it unchanged; at
-evaluation :class:`~tether_gym_agents.hybrid.ResidualPolicy` computes the same sum
+evaluation :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` computes the same sum
 around the trained agent.
 
-:class:`~tether_gym_agents.residual_spec.ResidualSpec` (re-exported here) is the
+:class:`~tether_gym_agents.hybrids.residual_spec.ResidualSpec` (re-exported here) is the
 plain-data description of a hybrid: the ``residual`` key of a training config, the
 ``"hybrid"`` entry of ``agent.json``.
 """
@@ -30,10 +31,10 @@ from tether_gym.physics import STATE
 from tether_gym.safety import FilterResult, SafetyFilter
 from tether_gym.wrappers import state_of
 
-from .hybrid import state_from_observation
-from .obs import ObservationLayout
-from .residual_spec import DEFAULT_SCALE, BaseLaw, ResidualSpec
-from .smc import SlidingModeController
+from ..baselines.smc import SlidingModeController
+from ..common.obs import ObservationLayout
+from ..hybrids.policies import state_from_observation
+from ..hybrids.residual_spec import DEFAULT_SCALE, BaseLaw, ResidualSpec
 
 __all__ = ["BaseLaw", "ResidualSpec", "ResidualVecEnv", "DEFAULT_SCALE", "INFO_KEYS"]
 
@@ -62,7 +63,7 @@ class ResidualVecEnv(VecEnvWrapper):
     their current observations (after an auto-reset: the new episode's first
     observation, which SB3 returns in place of the terminal one), ``scale * action`` is
     added, the sum is clipped to [-1, 1], filtered when a filter is given, cast to
-    float32 (as :class:`~tether_gym_agents.hybrid.ResidualPolicy` returns it) and sent
+    float32 (as :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` returns it) and sent
     to the wrapped env. ``infos[i]`` gets :data:`INFO_KEYS` of that step.
 
     Parameters
@@ -79,7 +80,7 @@ class ResidualVecEnv(VecEnvWrapper):
         Filter of the summed command (None: unfiltered). It is given the true state of
         each sub-env from the env's ``info`` (reset info after a reset), as
         :class:`tether_gym.wrappers.SafetyFilterWrapper` does, or the state read from
-        the observation (:func:`~tether_gym_agents.hybrid.state_from_observation`)
+        the observation (:func:`~tether_gym_agents.hybrids.policies.state_from_observation`)
         for a sub-env whose info lacks it.
 
     Raises

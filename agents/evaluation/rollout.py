@@ -1,6 +1,6 @@
 """Run policies on the native vector env and record every episode: the one rollout path.
 
-:func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation`) and by
+:func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation.benchmark`) and by
 the paper reproduction (:mod:`tether_gym_agents.paper`). It builds
 ``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=len(seeds),
 vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
@@ -9,7 +9,7 @@ called through stable-baselines3's interface, ``policy.predict(obs, deterministi
 with **one observation per call** (``obs[i:i + 1]``): a batched forward pass of a torch
 network changes an action by ~1e-7 with the batch size, which a closed loop can amplify
 into a different episode. The exception are policies that declare ``batch_invariant``
-(trained MLPs, :mod:`tether_gym_agents.mlp`; the sliding-mode law, the safety filter
+(trained MLPs, :mod:`tether_gym_agents.files.mlp`; the sliding-mode law, the safety filter
 and the hybrids built of such parts): their rows are bitwise independent of the batch,
 so the episodes that share one get a single call. Either way an episode's actions
 depend on its seed, the env arguments and the policy only, never on how many episodes
@@ -32,7 +32,7 @@ import numpy as np
 
 from tether_gym import ENV_ID
 
-from .obs import ObservationLayout
+from ..common.obs import ObservationLayout
 
 __all__ = ["Trajectory", "rollout", "RECORDED_KEYS"]
 
@@ -86,7 +86,7 @@ class Trajectory:
     filter_active: np.ndarray | None = None
     """(K,) bool: whether a safety filter changed step k's action; None for policies
     without one (those that do not set ``last_filter_active``, see
-    :class:`tether_gym_agents.hybrid.FilteredPolicy`)."""
+    :class:`tether_gym_agents.hybrids.policies.FilteredPolicy`)."""
 
     @property
     def orbits(self) -> np.ndarray:

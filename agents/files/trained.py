@@ -1,6 +1,6 @@
 """Load a trained agent as a policy with the common ``predict``.
 
-An agent is a folder in the safe format of :mod:`tether_gym_agents.agent_files`
+An agent is a folder in the safe format of :mod:`tether_gym_agents.files.agent_files`
 (``agent.json`` + ``policy.safetensors``: tensors and plain data only, so loading never runs
 code). ``TrainedAgent.load`` accepts such a folder, a run folder written by
 ``train.py`` (its best agent sits at the top, the final one in ``final_agent/``,
@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.features import FeatureSpec, add_features
 from .agent_files import (
     AGENT_FILE,
     PICKLED_MODEL_FILES,
@@ -30,13 +31,12 @@ from .agent_files import (
     run_hybrid,
     seed_runs,
 )
-from .features import FeatureSpec, add_features
 from .mlp import NumpyMLP
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
            "RUN_AGENT_DIRS", "find_unit", "hybrid_of"]
 
-PRETRAINED_DIR = Path(__file__).resolve().parent / "pretrained"
+PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
 """Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
 
 RUN_AGENT_DIRS = ("final_agent",)
@@ -103,11 +103,11 @@ class TrainedAgent:
         The folder it was loaded from.
     hybrid : dict or None
         ``{"base", "scale", "filter"}`` when the policy is the residual of a hybrid
-        (it then acts only through :class:`~tether_gym_agents.hybrid.ResidualPolicy`),
+        (it then acts only through :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy`),
         None for a policy that acts alone.
     features : FeatureSpec or None
         The input features the policy appends to each observation before it is
-        normalised (:mod:`tether_gym_agents.features`); None: the observation alone.
+        normalised (:mod:`tether_gym_agents.common.features`); None: the observation alone.
     """
 
     def __init__(self, model, obs_rms=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
@@ -129,7 +129,7 @@ class TrainedAgent:
         model.set_training_mode(False)  # once here, not on every predict
         self.mlp = NumpyMLP.from_policy(model)
         """The batch-invariant float64 forward pass of the deterministic action
-        (:mod:`tether_gym_agents.mlp`), None when the network is not a plain MLP."""
+        (:mod:`tether_gym_agents.files.mlp`), None when the network is not a plain MLP."""
 
     @property
     def batch_invariant(self) -> bool:

@@ -18,7 +18,7 @@ import numpy as np
 from tether_gym.params import check_range
 from tether_gym.physics import TetherChain
 
-from .obs import ObservationLayout, ReelRatePolicy
+from ..common.obs import ObservationLayout, ReelRatePolicy
 
 __all__ = ["SlidingModeController"]
 

@@ -2,8 +2,9 @@
 
 A :class:`ResidualSpec` is the ``residual`` key of a training config
 (``agents/configs/ppo_residual.yml``), the ``"hybrid"`` entry of an ``agent.json`` and
-:attr:`tether_gym_agents.trained.TrainedAgent.hybrid`; :mod:`tether_gym_agents.residual_env`
-trains the hybrid it describes and :mod:`tether_gym_agents.evaluation` evaluates it.
+:attr:`tether_gym_agents.files.trained.TrainedAgent.hybrid`;
+:mod:`tether_gym_agents.training.residual_env`
+trains the hybrid it describes and :mod:`tether_gym_agents.evaluation.benchmark` evaluates it.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
-from .jsonio import checked_mapping
+from ..common.jsonio import checked_mapping
 
 __all__ = ["BaseLaw", "ResidualSpec", "DEFAULT_SCALE"]
 

@@ -6,7 +6,7 @@ the run:
 * ``config.yml`` (resolved hyperparameters, algorithm, env id and the resolved env
   kwargs), ``args.yml`` (parsed arguments), ``command.txt`` (every command line);
 * ``agent.json`` + ``policy.safetensors``: the best agent (the evaluations' best) in the
-  safe format of :mod:`tether_gym_agents.agent_files`, which is what ``evaluate.py
+  safe format of :mod:`tether_gym_agents.files.agent_files`, which is what ``evaluate.py
   RUN`` loads; ``final_agent/``: the agent at the last step, in the same format;
 * ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
   ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
@@ -34,17 +34,17 @@ import gymnasium as gym
 
 import tether_gym
 
-from .agent_files import save_agent, seed_runs
-from .env_kwargs import parse_env_kwargs as _parse_env_kwargs
-from .features import FeatureSpec
-from .jsonio import to_jsonable
-from .residual_spec import ResidualSpec
+from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
+from ..common.features import FeatureSpec
+from ..common.jsonio import to_jsonable
+from ..files.agent_files import save_agent, seed_runs
+from ..hybrids.residual_spec import ResidualSpec
 
 __all__ = ["main", "load_hyperparams", "parse_env_kwargs", "resolve_env_kwargs",
            "residual_spec", "feature_spec", "plot_learning_curve", "plot_seed_learning_curves",
            "ConfigError", "CONFIG_DIR"]
 
-CONFIG_DIR = Path(__file__).resolve().parent / "configs"
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
             "checkpoint_freq", "residual", "features")
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
@@ -170,7 +170,8 @@ def residual_spec(value, source: str) -> ResidualSpec | None:
     """The validated ``residual`` key of a config (None: no hybrid).
 
     ``residual: {base: smc, scale: 0.2, filter: true}`` trains the residual of the
-    hybrid u = filter(clip(u_smc + scale * a, -1, 1)) (:mod:`tether_gym_agents.residual_env`).
+    hybrid u = filter(clip(u_smc + scale * a, -1, 1))
+    (:mod:`tether_gym_agents.training.residual_env`).
 
     Raises
     ------
@@ -185,7 +186,7 @@ def feature_spec(value, source: str) -> FeatureSpec | None:
 
     ``features: {name: symlog_errors, scale: 0.001}`` makes the policy's network see
     symlog(e / S) and symlog(e' / S) beside the observation
-    (:mod:`tether_gym_agents.features`).
+    (:mod:`tether_gym_agents.common.features`).
     """
     return _config_spec(FeatureSpec, value, f"{source}: features")
 
@@ -218,7 +219,7 @@ def _rate_mode_for(spec: ResidualSpec | None, env_kwargs: dict, source: str,
 
 
 def parse_env_kwargs(items: list[str]) -> dict:
-    """``--env-kwargs key=value ...`` as a dict (:mod:`tether_gym_agents.env_kwargs`).
+    """``--env-kwargs key=value ...`` as a dict (:mod:`tether_gym_agents.common.env_kwargs`).
 
     Raises
     ------
@@ -414,7 +415,7 @@ def _build_parser() -> argparse.ArgumentParser:
                           "with one CPU per run)")
     fan.add_argument("--sweep", type=Path, default=None, metavar="FILE.yml",
                      help="search config keys x several seeds per trial, rank by the median "
-                          "final evaluation return (file format: tether_gym_agents.sweep)")
+                          "final evaluation return (file format: tether_gym_agents.training.sweep)")
     return p
 
 

@@ -24,7 +24,7 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
-from .jsonio import sha256_file, to_jsonable
+from ..common.jsonio import sha256_file, to_jsonable
 from .metrics import FAILURES, HIGHER_IS_BETTER, METRICS
 from .stats import (
     BOOTSTRAP_SEED,
@@ -64,7 +64,7 @@ def agent_files(path: Path) -> dict:
 def display_path(path) -> str:
     """``path`` relative to the repository (or working directory) when inside it."""
     path = Path(path).resolve()
-    for root in (Path(__file__).resolve().parent.parent, Path.cwd()):
+    for root in (Path(__file__).resolve().parents[2], Path.cwd()):
         try:
             return str(path.relative_to(root))
         except ValueError:
@@ -73,7 +73,7 @@ def display_path(path) -> str:
 
 
 def _git_commit() -> dict | None:
-    root = Path(__file__).resolve().parent.parent
+    root = Path(__file__).resolve().parents[2]
     if not (root / ".git").exists():
         return None
     try:

@@ -2,7 +2,7 @@
 
 ``python train.py --algo ppo --seeds 10 --out runs/ppo`` trains seeds ``--seed`` ...
 ``--seed + 9``, each into its own normal run folder ``runs/ppo/seed_K/``. Every seed
-is one call of the single-run :func:`tether_gym_agents.training.main`, in-process
+is one call of the single-run :func:`tether_gym_agents.training.train.main`, in-process
 inside a Ray task, with the command line that ``train.py --seed K --out
 runs/ppo/seed_K`` would get (``command.txt`` in the folder records it), so a seed
 folder is exactly a single-seed run folder.
@@ -56,7 +56,7 @@ from enum import Enum
 from pathlib import Path
 from typing import Any
 
-from .training import ConfigError, load_hyperparams, parse_env_kwargs
+from .train import ConfigError, load_hyperparams, parse_env_kwargs
 
 __all__ = ["RAY_PIP", "RunState", "SeedJob", "run_from_args", "run_jobs", "init_ray",
            "require_ray", "run_state", "train_seed", "seed_argv", "target_timesteps",
@@ -168,7 +168,7 @@ def target_timesteps(args: argparse.Namespace) -> int:
 
 def config_path(args) -> Path:
     """The hyperparameter file of a run: ``--config``, else the packaged ``<algo>.yml``."""
-    from .training import CONFIG_DIR
+    from .train import CONFIG_DIR
 
     return Path(args.config) if args.config else CONFIG_DIR / f"{args.algo}.yml"
 
@@ -270,7 +270,7 @@ def train_seed(job: SeedJob, threads: int = 1) -> dict:
     import numba
     import torch
 
-    from .training import main as train_main
+    from .train import main as train_main
 
     torch.set_num_threads(threads)
     with contextlib.suppress(ValueError):  # NUMBA_NUM_THREADS lower than `threads`
@@ -454,7 +454,7 @@ def run_from_args(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     failed = [r for r in results if r["status"] == "failed"]
     print(f"{len(results) - len(failed)}/{len(results)} seeds complete in {out} "
           f"({time.perf_counter() - t0:.0f} s)")
-    from .training import plot_seed_learning_curves
+    from .train import plot_seed_learning_curves
 
     plot = plot_seed_learning_curves(out)
     if plot is not None:

@@ -2,7 +2,8 @@
 
 All have stable-baselines3's ``predict(observation, state=None, episode_start=None,
 deterministic=True) -> (actions, state)``, so they run through
-:func:`~tether_gym_agents.rollout.rollout`, :mod:`~tether_gym_agents.evaluation` and
+:func:`~tether_gym_agents.evaluation.rollout.rollout`,
+:mod:`~tether_gym_agents.evaluation.benchmark` and
 SB3's ``evaluate_policy`` like every other policy. They are ``batch_invariant`` when
 their parts are (each row's action is bitwise what it would be alone).
 
@@ -25,7 +26,7 @@ from tether_gym.params import check_range
 from tether_gym.physics import STATE
 from tether_gym.safety import FilterResult, SafetyFilter
 
-from .obs import ObservationLayout
+from ..common.obs import ObservationLayout
 
 __all__ = ["FilteredPolicy", "ResidualPolicy", "HandoverPolicy", "state_from_observation"]
 
@@ -79,7 +80,7 @@ class _Filtering:
         """Of those, how many had no command meeting every constraint."""
         self.last_filter_active: np.ndarray | None = None
         """(B,) bool: whether the filter changed each action of the last call (None
-        without a filter), read by :func:`tether_gym_agents.rollout.rollout` for the
+        without a filter), read by :func:`tether_gym_agents.evaluation.rollout.rollout` for the
         ``filter_rate`` metric."""
         self.last_result: FilterResult | None = None
 
@@ -131,7 +132,7 @@ class FilteredPolicy(_Filtering):
     ----------
     policy : object with ``predict``
         Its actions are normalised reel-rate commands in [-1, 1] (a rate-mode env's
-        actions; e.g. :class:`~tether_gym_agents.smc.SlidingModeController`).
+        actions; e.g. :class:`~tether_gym_agents.baselines.smc.SlidingModeController`).
     safety_filter : SafetyFilter
         The filter (:meth:`SafetyFilter.for_env`).
     layout : ObservationLayout or None
@@ -240,7 +241,7 @@ class HandoverPolicy(_Filtering):
     Parameters
     ----------
     learned : TrainedAgent
-        A trained agent (:class:`~tether_gym_agents.trained.TrainedAgent`) on this
+        A trained agent (:class:`~tether_gym_agents.files.trained.TrainedAgent`) on this
         env's observation. Trained with ``action_mode="increment"`` (its recorded env
         arguments say so), its action a becomes the command
         u = clip(u_obs + increment_gain * a, -1, 1) from the observed command u_obs,
@@ -269,7 +270,7 @@ class HandoverPolicy(_Filtering):
     def __init__(self, learned, base, safety_filter: SafetyFilter | None = None,
                  enter: float | None = None, command_bound: float = 0.5,
                  layout: ObservationLayout | None = None):
-        from .smc import SlidingModeController
+        from ..baselines.smc import SlidingModeController
 
         if not hasattr(learned, "predict"):
             raise TypeError(f"learned must have a predict method, got "

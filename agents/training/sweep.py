@@ -72,7 +72,7 @@ from .fanout import (
     seed_argv,
     train_seed,
 )
-from .training import ConfigError, load_hyperparams, parse_env_kwargs
+from .train import ConfigError, load_hyperparams, parse_env_kwargs
 
 __all__ = ["Search", "SweepSpec", "load_sweep", "expand_trials", "apply_overrides",
            "final_eval_return", "rank_trials", "write_table", "run_sweep"]

@@ -5,7 +5,7 @@ computed from it by a fixed, named function: they are part of the policy (like t
 observation normalisation), not of the env, so the env and its id do not change. A
 :class:`FeatureSpec` names them; it is the ``features`` key of a training config, the
 ``"features"`` entry of an ``agent.json`` and :attr:`TrainedAgent.features
-<tether_gym_agents.trained.TrainedAgent>`. Files hold only the name and numbers, never
+<tether_gym_agents.files.trained.TrainedAgent>`. Files hold only the name and numbers, never
 code.
 
 The one feature set, ``symlog_errors``, appends for each tether i

@@ -6,11 +6,11 @@ open-loop baselines on the default suite and prints the tables;
 figures instead (:mod:`tether_gym_agents.paper`).
 
 Every policy, baseline or trained, is a ``predict`` object run by
-:func:`tether_gym_agents.rollout.rollout` on the native vector env (one sub-env per
+:func:`tether_gym_agents.evaluation.rollout.rollout` on the native vector env (one sub-env per
 seed, one observation per ``predict`` call, so an episode never depends on the number
 of seeds, the thread count or the order of the policies). Each episode becomes the
-metrics of :mod:`tether_gym_agents.metrics`; :mod:`tether_gym_agents.results` turns
-them into the statistics over training runs (:mod:`tether_gym_agents.stats`), the
+metrics of :mod:`.metrics`; :mod:`.results` turns
+them into the statistics over training runs (:mod:`.stats`), the
 tables and ``results.json``.
 
 A policy is a baseline name (``smc``, the paper's sliding-mode law; ``smc_filtered``,
@@ -19,12 +19,12 @@ the same law behind the model-based safety filter of :mod:`tether_gym.safety`;
 agent (``ppo``, ``sac``, ...), a run folder or model file written by ``train.py``, or a
 folder of seed run folders (``runs/ppo/seed_0/``, ``seed_1/``, ...), which is one
 policy with one run per folder. An agent whose files record a ``hybrid`` (trained
-with a ``residual`` config, :mod:`tether_gym_agents.residual_env`) is of kind
+with a ``residual`` config, :mod:`tether_gym_agents.training.residual_env`) is of kind
 ``hybrid``: it runs as the residual of
-:class:`~tether_gym_agents.hybrid.ResidualPolicy` around the sliding-mode law (and
+:class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` around the sliding-mode law (and
 the filter, when it was trained with one), both on the scenario's nominal model like
 ``smc`` and ``smc_filtered``. ``handover:AGENT`` (e.g. ``handover:ppo``) is the hybrid
-:class:`~tether_gym_agents.hybrid.HandoverPolicy` of a trained agent: the agent steers
+:class:`~tether_gym_agents.hybrids.policies.HandoverPolicy` of a trained agent: the agent steers
 the transient and hands over to the sliding-mode law inside its boundary layer, all of
 it behind the safety filter, on the same nominal model.
 """
@@ -45,8 +45,8 @@ import numpy as np
 
 import tether_gym
 
-from .agent_files import seed_runs
-from .env_kwargs import parse_env_kwargs
+from ..common.env_kwargs import parse_env_kwargs
+from ..files.agent_files import seed_runs
 from .metrics import episode_metrics
 from .rollout import Trajectory, rollout
 from .scenarios import Scenario, describe_suites, get_suite
@@ -90,7 +90,7 @@ class PolicySpec:
     agents: list = field(default_factory=list)
     allow_pickle: bool = False
     handover: bool = False
-    """A :class:`~tether_gym_agents.hybrid.HandoverPolicy` of the runs' agents (else a
+    """A :class:`~tether_gym_agents.hybrids.policies.HandoverPolicy` of the runs' agents (else a
     hybrid is the residual its agents record)."""
 
     @property
@@ -132,7 +132,7 @@ class PolicySpec:
 
     def load(self) -> None:
         """Load every run's agent with ``TrainedAgent.load`` (no-op for baselines)."""
-        from .trained import TrainedAgent
+        from ..files.trained import TrainedAgent
 
         if self.kind is PolicyKind.BASELINE or self.agents:
             return
@@ -152,7 +152,7 @@ class PolicySpec:
         episode's interventions); ``random`` gets a generator per episode, seeded with
         the episode's seed, so that its actions do not depend on the other episodes.
         """
-        from .open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
+        from ..baselines.open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
 
         if self.handover:
             return [_handover(self.agents[run], env, scenario)] * len(seeds)
@@ -165,7 +165,7 @@ class PolicySpec:
         if self.name == "smc":
             policy: object = _nominal_smc(env, scenario)
         elif self.name == "smc_filtered":
-            from .hybrid import FilteredPolicy
+            from ..hybrids.policies import FilteredPolicy
 
             policy = FilteredPolicy(_nominal_smc(env, scenario), _nominal_filter(env, scenario))
         elif self.name == "zero":
@@ -177,7 +177,7 @@ class PolicySpec:
 
 def _rate_mode() -> dict:
     """Env arguments of the policies that command reel rates (baselines, hybrids)."""
-    from .obs import ReelRatePolicy
+    from ..common.obs import ReelRatePolicy
 
     return ReelRatePolicy.ENV_KWARGS
 
@@ -188,7 +188,7 @@ def _nominal_smc(env, scenario: Scenario):
     It never reads e or the masses from the observation (a hybrid's env observes them
     when its agent does): the law runs on its design model, as ``smc`` does.
     """
-    from .smc import SlidingModeController
+    from ..baselines.smc import SlidingModeController
 
     nominal = None
     if scenario.nominal is not None:
@@ -213,7 +213,7 @@ def _residual(agent, env, scenario: Scenario):
     The sliding-mode law and the filter use the scenario's nominal model, as ``smc`` and
     ``smc_filtered`` do.
     """
-    from .hybrid import ResidualPolicy
+    from ..hybrids.policies import ResidualPolicy
 
     spec = agent.hybrid
     if spec is None:
@@ -224,14 +224,14 @@ def _residual(agent, env, scenario: Scenario):
 
 def _handover(agent, env, scenario: Scenario):
     """``agent`` handing over to SMC, filtered, both on the scenario's nominal model."""
-    from .hybrid import HandoverPolicy
+    from ..hybrids.policies import HandoverPolicy
 
     return HandoverPolicy(agent, _nominal_smc(env, scenario), _nominal_filter(env, scenario))
 
 
 def shipped_agents() -> dict[str, Path]:
     """Shipped agents: agent folders and folders of seed run folders in ``pretrained/``."""
-    from .trained import pretrained_agents
+    from ..files.trained import pretrained_agents
 
     return pretrained_agents()
 
@@ -272,7 +272,7 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
         raise ValueError(f"unknown policy {name!r}: give one of {valid} or a path to a trained "
                          "agent (run folder, model file or folder of seed_K run folders)")
     runs = seed_runs(path) or [path]
-    from .trained import hybrid_of
+    from ..files.trained import hybrid_of
 
     hybrid = [hybrid_of(run) is not None for run in runs]
     if any(hybrid) and not all(hybrid):
@@ -375,7 +375,7 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
     policies : list of str
         Baseline names, shipped agents' names or paths (see the module docstring).
     suite : str
-        A built-in suite name or a YAML suite file (:mod:`tether_gym_agents.scenarios`).
+        A built-in suite name or a YAML suite file (:mod:`tether_gym_agents.evaluation.scenarios`).
     n_seeds : int
         Episodes per scenario and training run (1 ... MAX_SEEDS), seeds ``seed`` ...
         ``seed + n_seeds - 1``.
@@ -400,7 +400,7 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
     Returns
     -------
     dict
-        The content of ``results.json`` (:func:`tether_gym_agents.results.build_results`).
+        The content of ``results.json`` (:func:`.results.build_results`).
     """
     from .results import build_results, write_results
 
@@ -456,7 +456,7 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
     if out is not None:
         write_results(results, Path(out) / "results.json")
         if plots:
-            from .eval_plots import plot_results
+            from .plots import plot_results
 
             plot_results(results, trajectories, settings[0].scenario, Path(out), log)
     return results
@@ -518,7 +518,7 @@ def _bench_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
 def _build_parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     import textwrap
 
-    from .paper.cli import add_arguments as add_paper_arguments
+    from ..paper.cli import add_arguments as add_paper_arguments
 
     notes = (
         "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
@@ -565,7 +565,7 @@ def main(argv=None) -> int:
     top, _ = _build_parser()
     args = top.parse_args(argv)
     if args.command == "paper":
-        from .paper.cli import run as paper_run
+        from ..paper.cli import run as paper_run
 
         return paper_run(args)
     try:

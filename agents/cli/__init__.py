@@ -1,0 +1,1 @@
+"""Command lines: ``evaluate.py`` and ``train.py`` call ``evaluate.main`` and ``train.main``."""
