@@ -1,7 +1,9 @@
 """Markdown table of a PPO probe from evaluate.py's results of each variant.
 
-A probe folder keeps results_<variant>.json (default suite, ``python evaluate.py RUNS
---out ...``) and beyond_<variant>.json (``--suite beyond``); its table.py calls
+A probe's table.py reads, in its folder, results_<variant>.json (the results.json of
+``python evaluate.py RUNS --out OUT``, default suite) and beyond_<variant>.json (the same
+with ``--suite beyond``), copied there after the runs (git does not track them: they are
+raw per-episode outputs; the probe's table.md keeps the table), and calls
 :func:`print_table` with the variants' labels. A variant may name another probe's files
 by a relative path (``../observe_e/blind``).
 """

@@ -1,8 +1,13 @@
 #!/bin/bash
+# One 1M-step PPO run of the increment-gain sweep: gain, seed (jobs.txt lists all nine).
+# configs/ppo.yml otherwise; runs go to runs/gain/g<gain>/seed_<seed> (repository root).
 g=$1; s=$2
-cd /work/main && source .venv/bin/activate
+cd "$(dirname "$0")/../../.." && source .venv/bin/activate   # the repository root
 export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
-out=/work/runs/gain/g${g}/seed_${s}
-mkdir -p $(dirname $out)
-python train.py --algo ppo --seed $s --timesteps 1000000 --env-kwargs increment_gain=$g --out $out --no-progress > /work/runs/gain/g${g}_s${s}.log 2>&1
-echo "$(date -u +%T) done g=$g s=$s rc=$?"
+out=runs/gain/g${g}/seed_${s}
+mkdir -p "$(dirname "$out")"
+start=$(date +%s)
+python train.py --algo ppo --seed "$s" --timesteps 1000000 --env-kwargs increment_gain="$g" \
+  --out "$out" --no-progress > "runs/gain/g${g}_s${s}.log" 2>&1
+rc=$?
+echo "$(date -u +%T) done g=$g s=$s rc=$rc wall=$(( $(date +%s) - start ))s"

@@ -1,10 +1,14 @@
-"""Markdown table of the increment-gain sweep from the evaluate.py results of each gain."""
+"""Markdown table of the increment-gain sweep: ``python table.py [FOLDER]``.
+
+FOLDER (default: this folder) holds ``results_g<gain>.json``, the ``results.json`` of
+``python evaluate.py runs/gain/g<gain> --out ...`` for each gain (not tracked by git).
+"""
 
 import json
 import sys
 from pathlib import Path
 
-HERE = Path(sys.argv[1]) if len(sys.argv) > 1 else Path("/work/runs/gain")
+HERE = Path(sys.argv[1]) if len(sys.argv) > 1 else Path(__file__).parent
 
 
 def cell(block: dict, metric: str, fmt: str) -> str:
@@ -18,7 +22,11 @@ print("| increment gain | seeds | success | tracking RMS [rad] | reel excursion 
       "| failed episodes |")
 print("|---|---|---|---|---|---|---|")
 for gain in ("0.1", "0.25", "0.5"):
-    results = json.loads((HERE / f"eval_g{gain}" / "results.json").read_text())
+    path = HERE / f"results_g{gain}.json"
+    if not path.is_file():
+        raise SystemExit(f"{path} missing: copy there the results.json of "
+                         f"`python evaluate.py runs/gain/g{gain} --out ...`")
+    results = json.loads(path.read_text())
     (block,) = results["policies"].values()
     fails = sum(block["failures"].values())
     print(f"| {gain} | {block['n_runs']} | {cell(block, 'success', '{:.3f}')} | "
