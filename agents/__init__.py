@@ -3,11 +3,24 @@
 The repository keeps this package in ``agents/``; it is installed under the name
 ``tether_gym_agents`` so that it cannot clash with other top-level ``agents``
 packages. ``tether_gym`` itself never imports it.
+
+Evaluate a controller of your own beside the shipped ones: register it with
+:func:`register_policy` and score it with :func:`evaluate` (or ``evaluate.py NAME``
+through :func:`tether_gym_agents.cli.evaluate.main`). Importing the package loads
+neither torch nor stable-baselines3.
+
+Subpackages, from the bottom up (imports only go down): ``common`` (observation layout,
+env arguments, JSON helpers), ``baselines`` (sliding-mode and open-loop laws),
+``hybrids`` (safety filter around a policy, residual RL, handover), ``files`` (agent
+files and run folders), ``evaluation`` and ``training``, ``paper`` (the paper's
+figures), ``cli`` (``evaluate.py``, ``train.py``).
 """
 
 from .baselines.open_loop import AngleSource, PeriodicReel, RandomPolicy, ZeroStateReel
 from .baselines.smc import SlidingModeController
 from .common.obs import ObservationLayout, ReelRatePolicy
+from .evaluation.benchmark import EvalOptions, evaluate
+from .evaluation.registry import PolicyKind, register_policy
 
 __all__ = [
     "SlidingModeController",
@@ -17,4 +30,8 @@ __all__ = [
     "RandomPolicy",
     "ReelRatePolicy",
     "ObservationLayout",
+    "register_policy",
+    "PolicyKind",
+    "evaluate",
+    "EvalOptions",
 ]

@@ -1,5 +1,171 @@
-"""``python evaluate.py``: benchmark policies, or reproduce the paper (``evaluate.py paper``)."""
+"""``python evaluate.py``: benchmark policies, or reproduce the paper (``evaluate.py paper``).
 
-from ..evaluation.benchmark import main
+``evaluate.py [bench] [policies] [options]`` (the default command) checks every argument,
+then runs :func:`tether_gym_agents.evaluation.benchmark.evaluate` and prints its tables;
+``evaluate.py paper --out DIR`` (alias ``--paper``) runs
+:func:`tether_gym_agents.paper.cli.run`. A policy name is anything the policy registry
+resolves (:mod:`tether_gym_agents.evaluation.registry`), including the policies that user
+code registered with :func:`tether_gym_agents.register_policy` before calling
+:func:`main`. A bad argument, such as an unknown policy, is one ``evaluate.py: error:``
+line on stderr and exit code 2.
+"""
 
-__all__ = ["main"]
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import tether_gym
+
+from ..common.env_kwargs import parse_env_kwargs
+from ..evaluation.benchmark import (
+    MAX_SEED,
+    MAX_SEEDS,
+    MAX_TORCH_THREADS,
+    EvalOptions,
+    check_int,
+    check_out_dir,
+    evaluate,
+)
+from ..evaluation.registry import default_policies, resolve_policy
+from ..evaluation.results import markdown_tables
+from ..evaluation.scenarios import describe_suites, get_suite
+
+__all__ = ["main", "build_parser"]
+
+COMMANDS = ("bench", "paper")
+NOTES = (
+    "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
+    "description: ..., env_kwargs: {...}, nominal: {masses: [...], eccentricity: ...}}]'.",
+    "The table reports, per policy, the interquartile mean over training runs x "
+    "scenarios of each run's mean over its episodes, with a 95 % stratified-bootstrap "
+    "interval (2 runs or more) and the probability of improvement over smc.",
+    "A policy of your own: register it with tether_gym_agents.register_policy(name, "
+    "factory, kind=..., env_kwargs=...) and call tether_gym_agents.cli.evaluate.main([name, "
+    "...]) or tether_gym_agents.evaluate([name, ...]) (README: Evaluate your own "
+    "controller).",
+    "Reproduce the paper instead: evaluate.py paper --out DIR (alias: evaluate.py "
+    "--paper --out DIR).")
+
+
+def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    parser.add_argument("policies", nargs="*",
+                        help="registered policies (smc, smc_filtered, zero, periodic, "
+                             "random, and those added with register_policy), shipped agents "
+                             "(ppo, ...), paths to trained agents (run folder, model file, or "
+                             "a folder of seed_K run folders = one policy with several runs), "
+                             "or handover:AGENT (the agent hands over to smc, filtered); "
+                             "default: all baselines, shipped agents and handover:ppo")
+    parser.add_argument("--suite", default="default",
+                        help="scenario suite: a name below or a YAML suite file (default: "
+                             "default)")
+    parser.add_argument("--env-kwargs", nargs="+", default=[], metavar="KEY=VALUE",
+                        help="env arguments applied on top of every scenario, as Python "
+                             "literals, e.g. n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
+    parser.add_argument("--seeds", type=int, default=10,
+                        help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
+    parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
+    parser.add_argument("--out", type=Path, default=Path("runs/eval"),
+                        help="folder for results.json and plots (default runs/eval)")
+    parser.add_argument("--torch-threads", type=int, default=1,
+                        help="torch threads for trained agents (default 1; results do not "
+                             "depend on it)")
+    parser.add_argument("--no-plots", action="store_true", help="skip the plots")
+    parser.add_argument("--allow-pickle", action="store_true",
+                        help="also load stable-baselines3's pickled files (*.zip, "
+                             "vecnormalize.pkl) when a folder has no agent.json; a pickle "
+                             "runs code when loaded: only for files you made or trust")
+    return parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``evaluate.py`` with its ``bench`` and ``paper`` commands."""
+    from ..paper.cli import add_arguments as add_paper_arguments
+
+    epilog = "\n\n".join([describe_suites(), *(textwrap.fill(n, 79) for n in NOTES)])
+    top = argparse.ArgumentParser(
+        prog="evaluate.py", formatter_class=argparse.RawDescriptionHelpFormatter,
+        description="Benchmark policies on tether_gym scenario suites (evaluate.py [bench] "
+                    "...), or reproduce the paper's figures (evaluate.py paper ...).",
+        epilog=epilog)
+    sub = top.add_subparsers(dest="command", metavar="{bench,paper}")
+    bench = sub.add_parser("bench", help="benchmark policies (the default command)",
+                           prog="evaluate.py [bench]", epilog=epilog,
+                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                           description="Benchmark policies on a tether_gym scenario suite.")
+    _bench_arguments(bench)
+    paper = sub.add_parser("paper", help="reproduce Shi, Zhu & Zhu (2019), Figs. 2-9",
+                           prog="evaluate.py paper",
+                           description="Reproduce Shi, Zhu & Zhu (2019), Figs. 2-9, from "
+                                       "tether_gym and write paper_vs_tether_gym.md/.json "
+                                       "beside the PNG figures.")
+    add_paper_arguments(paper)
+    return top
+
+
+def _with_command(argv: list[str]) -> list[str]:
+    """``argv`` with its command first: ``--paper`` anywhere means ``paper``, none ``bench``."""
+    if "--paper" in argv:
+        return ["paper"] + [a for a in argv if a != "--paper"]
+    if not argv or argv[0] not in COMMANDS:
+        return ["bench", *argv]
+    return argv
+
+
+def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
+    """The env arguments and the policies of a bench command, every argument checked.
+
+    Raises ValueError naming the flag or the value, before anything is built or run.
+    """
+    env_kwargs = parse_env_kwargs(args.env_kwargs)
+    check_int("--seeds", args.seeds, 1, MAX_SEEDS)
+    check_int("--seed", args.seed, 0, MAX_SEED - args.seeds + 1)
+    check_int("--torch-threads", args.torch_threads, 1, MAX_TORCH_THREADS)
+    get_suite(args.suite)
+    policies = args.policies or default_policies()
+    for name in policies:
+        resolve_policy(name)
+    check_out_dir(args.out)
+    return env_kwargs, policies
+
+
+def _bench(args: argparse.Namespace, command: str) -> int:
+    """Run the bench command; print the tables. Returns the exit code."""
+    try:
+        env_kwargs, policies = _checked(args)
+        t0 = time.perf_counter()
+        print(f"tether_gym {tether_gym.__version__}: {len(policies)} policies on suite "
+              f"{args.suite!r}, {args.seeds} seeds per scenario and run, torch threads "
+              f"{args.torch_threads}" + (f", env kwargs {env_kwargs}" if env_kwargs else ""))
+        options = EvalOptions(out=args.out, plots=not args.no_plots,
+                              torch_threads=args.torch_threads, command=command,
+                              allow_pickle=args.allow_pickle)
+        results = evaluate(policies, args.suite, args.seeds, args.seed, env_kwargs, options)
+    except ValueError as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    print()
+    print(markdown_tables(results))
+    print(f"\nresults: {args.out / 'results.json'} ({time.perf_counter() - t0:.0f} s)")
+    return 0
+
+
+def main(argv=None) -> int:
+    """Command line of ``evaluate.py``; returns the exit code.
+
+    ``evaluate.py [bench] [policies] [options]`` benchmarks (the default command),
+    ``evaluate.py paper --out DIR`` reproduces the paper; ``--paper`` anywhere is an
+    alias of the ``paper`` command.
+    """
+    argv = [str(a) for a in (sys.argv[1:] if argv is None else argv)]
+    command = shlex.join(["evaluate.py", *argv])
+    args = build_parser().parse_args(_with_command(argv))
+    if args.command == "paper":
+        from ..paper.cli import run as paper_run
+
+        return paper_run(args)
+    return _bench(args, command)

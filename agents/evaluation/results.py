@@ -116,7 +116,7 @@ def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
         "torch_threads_requested": torch_threads,
         "agents": {s.name: [{"path": display_path(p), "files": agent_files(p)}
                             for p in s.runs]
-                   for s in specs if s.kind.value != "baseline"},
+                   for s in specs if any(p is not None for p in s.runs)},
     }
 
 

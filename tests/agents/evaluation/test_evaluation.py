@@ -11,7 +11,9 @@ import shutil
 import numpy as np
 import pytest
 
+from tether_gym_agents.cli.evaluate import main
 from tether_gym_agents.evaluation import benchmark as evaluation
+from tether_gym_agents.evaluation import registry
 from tether_gym_agents.evaluation.metrics import METRICS
 from tether_gym_agents.evaluation.rollout import Trajectory
 from tether_gym_agents.evaluation.scenarios import SUITES, Scenario, get_suite
@@ -32,7 +34,7 @@ def _strict_load(text: str):
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("eval")
-    code = evaluation.main(["smc", "random", "--seeds", "2", *SHORT, "--out", str(out)])
+    code = main(["smc", "random", "--seeds", "2", *SHORT, "--out", str(out)])
     return code, out
 
 
@@ -82,7 +84,7 @@ def test_seed_folder_is_one_policy_with_several_runs(tmp_path):
         pytest.skip("no shipped PPO agent")
     folder = tmp_path / "ppo_runs"
     for k in (0, 1):  # the first shipped run, twice
-        shutil.copytree(evaluation.resolve_policy("ppo").runs[0], folder / f"seed_{k}")
+        shutil.copytree(registry.resolve_policy("ppo").runs[0], folder / f"seed_{k}")
     res = evaluation.evaluate(["smc", str(folder)], "paper", 2, out=tmp_path / "o", plots=False,
                               log=None, env_kwargs=SHORT_KWARGS)
     block = res["policies"][str(folder)]
@@ -131,7 +133,7 @@ def test_episodes_do_not_depend_on_seed_count_threads_or_order():
 # --------------------------------------------------------------------------- #
 def test_help_lists_the_suites_and_their_scenarios(capsys):
     with pytest.raises(SystemExit) as exc:
-        evaluation.main(["--help"])
+        main(["--help"])
     assert exc.value.code == 0
     text = capsys.readouterr().out
     for suite, scenarios in SUITES.items():
@@ -144,7 +146,7 @@ def test_help_lists_the_suites_and_their_scenarios(capsys):
 @pytest.mark.parametrize("argv", [["paper", "--help"], ["--paper", "--help"]])
 def test_paper_is_a_subcommand(argv, capsys):
     with pytest.raises(SystemExit) as exc:
-        evaluation.main(argv)
+        main(argv)
     assert exc.value.code == 0
     assert "--orbits" in capsys.readouterr().out
 
@@ -162,7 +164,7 @@ def test_paper_is_a_subcommand(argv, capsys):
     (["no_such_policy"], "no_such_policy"),
 ])
 def test_bad_arguments_fail_with_one_line(argv, flag, tmp_path, capsys):
-    code = evaluation.main(["smc", *argv, "--out", str(tmp_path / "o")])
+    code = main(["smc", *argv, "--out", str(tmp_path / "o")])
     captured = capsys.readouterr()
     assert code == 2
     lines = captured.err.strip().splitlines()
@@ -176,7 +178,7 @@ def test_out_that_is_a_file_or_unwritable_fails_before_evaluating(tmp_path, caps
     target = tmp_path / "file.txt"
     target.write_text("x")
     for out, words in ((target, "is a file"), (target / "sub", "not a writable folder")):
-        code = evaluation.main(["smc", *SHORT, "--seeds", "1", "--out", str(out)])
+        code = main(["smc", *SHORT, "--seeds", "1", "--out", str(out)])
         captured = capsys.readouterr()
         assert code == 2 and "--out" in captured.err and words in captured.err
         assert "building" not in captured.out and "[1/" not in captured.out
@@ -185,7 +187,7 @@ def test_out_that_is_a_file_or_unwritable_fails_before_evaluating(tmp_path, caps
 def test_every_agent_is_checked_before_anything_runs(tmp_path, capsys):
     if "ppo" not in pretrained_agents():
         pytest.skip("no shipped PPO agent")
-    code = evaluation.main(["smc", "ppo", *SHORT, "n_bodies=4", "--seeds", "1",
+    code = main(["smc", "ppo", *SHORT, "n_bodies=4", "--seeds", "1",
                             "--out", str(tmp_path)])
     captured = capsys.readouterr()
     assert code == 2
@@ -195,7 +197,7 @@ def test_every_agent_is_checked_before_anything_runs(tmp_path, capsys):
 
 
 def test_env_kwargs_apply_to_every_scenario(tmp_path, capsys):
-    code = evaluation.main(["smc", "zero", *SHORT, "n_bodies=4", "--seeds", "1",
+    code = main(["smc", "zero", *SHORT, "n_bodies=4", "--seeds", "1",
                             "--out", str(tmp_path), "--no-plots"])
     assert code == 0
     res = json.loads((tmp_path / "results.json").read_text())
@@ -295,33 +297,33 @@ def test_env_kwargs_are_literals_never_code():
 
 @needs_ppo
 def test_handover_names_a_hybrid_of_a_trained_agent():
-    spec = evaluation.resolve_policy("handover:ppo")
-    assert spec.kind is evaluation.PolicyKind.HYBRID and spec.handover
-    assert spec.runs == evaluation.resolve_policy("ppo").runs
+    spec = registry.resolve_policy("handover:ppo")
+    assert spec.kind is registry.PolicyKind.HYBRID and spec.handover
+    assert spec.runs == registry.resolve_policy("ppo").runs
     # reel rates, and the observation its agent was trained on
     assert spec.env_kwargs == {"action_mode": "rate", "observe_params": False}
-    assert evaluation.resolve_policy("ppo").env_kwargs == {
+    assert registry.resolve_policy("ppo").env_kwargs == {
         "increment_gain": 0.5, "observe_params": False}
-    assert "handover:ppo" in evaluation.default_policies()
+    assert "handover:ppo" in registry.default_policies()
     with pytest.raises(ValueError, match="acts alone"):
-        evaluation.resolve_policy("handover:smc")
+        registry.resolve_policy("handover:smc")
     with pytest.raises(ValueError, match="unknown policy"):
-        evaluation.resolve_policy("handover:nothing")
+        registry.resolve_policy("handover:nothing")
 
 
 def test_an_agent_is_evaluated_with_the_observation_it_was_trained_on(tmp_path):
     """An agent trained seeing e (observe_params="eccentricity") gets e on every
     scenario, alone and inside its handover hybrid, whose law still designs on its
     own model."""
-    from tether_gym_agents.training import train as training
+    from tether_gym_agents.cli.train import main as train_main
 
     run = tmp_path / "seeing_e"
-    assert training.main(["--out", str(run), "--timesteps", "256", "--n-envs", "2",
-                          "--no-progress", "--eval-episodes", "1", "--env-kwargs",
-                          "orbits_per_episode=0.05", "observe_params=eccentricity"]) == 0
-    spec = evaluation.resolve_policy(str(run))
+    assert train_main(["--out", str(run), "--timesteps", "256", "--n-envs", "2",
+                       "--no-progress", "--eval-episodes", "1", "--env-kwargs",
+                       "orbits_per_episode=0.05", "observe_params=eccentricity"]) == 0
+    spec = registry.resolve_policy(str(run))
     assert spec.env_kwargs["observe_params"] == "eccentricity"
-    hybrid = evaluation.resolve_policy("handover:" + str(run))
+    hybrid = registry.resolve_policy("handover:" + str(run))
     assert hybrid.env_kwargs == {"action_mode": "rate", "observe_params": "eccentricity"}
     res = evaluation.evaluate([str(run), "handover:" + str(run)], "paper", 1,
                               out=tmp_path / "o", plots=False, log=None,
