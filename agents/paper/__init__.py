@@ -7,6 +7,15 @@ this package, writes the figures as PNG files into DIR and a table
 beside ours, with a verdict. Where docs/model.md explains a
 difference, the table checks that explanation with its own run.
 
+Modules
+-------
+* ``settings``: the env arguments and constants of the studies;
+* ``runs``: one episode of a baseline through the benchmark's rollout;
+* ``studies``: the runs of each study and the numbers taken from them;
+* ``measures``: swing, chattering and the sliding-mode numbers;
+* ``figures``: the PNG files; ``table``: the rows and the Markdown page;
+* ``cli``: :func:`reproduce` (all of the above in order) and ``evaluate.py paper``.
+
 Studies and settings
 --------------------
 * Zero state (Figs. 2-4): Eq. 7 (:class:`~tether_gym_agents.baselines.open_loop.ZeroStateReel`)

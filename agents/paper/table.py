@@ -1,4 +1,9 @@
-"""Paper reproduction: the table."""
+"""Paper reproduction: the table that puts the paper's numbers beside ours.
+
+:func:`build_rows` turns the studies' numbers into rows, one small function per group
+of rows (:data:`ROW_GROUPS`, in table order); :func:`markdown` writes them as the
+``paper_vs_tether_gym.md`` page.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +11,8 @@ import itertools
 import math
 
 from tether_gym.envs.config import EnvConfig
+
+__all__ = ["ROW_GROUPS", "SHORT", "build_rows", "markdown"]
 
 _ENV = EnvConfig()
 """The env's defaults, quoted in the table's header."""
@@ -41,6 +48,7 @@ def _row(quantity, paper, ours, default="—", verdict="", note="") -> dict:
 
 
 SHORT = "n/a (run too short)"
+"""The verdict of a row whose quantity needs a longer run than ``--orbits`` allowed."""
 
 
 def _short(res: dict, needed: float) -> bool:
@@ -48,29 +56,37 @@ def _short(res: dict, needed: float) -> bool:
     return res["orbits"] is not None and res["orbits"] < needed - 1e-9
 
 
-def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
-    rows = []
+def _zero_state_rows(res: dict) -> list:
+    """Eq. 7 from the zero state: angles, the length peak and its return (Figs. 2-3)."""
     z = res["zero_state"]
     half = _short(res, 0.5)
+    return [
+        _row("Zero state (Eq. 7): max abs(theta_i) over the run [rad]", "0 (Fig. 2)",
+             _fmt(z["max_abs_theta"]),
+             verdict="reproduced" if z["max_abs_theta"] < 1e-2 else "not reproduced",
+             note="residual of the zero-order hold + reel lag (delay h_c/2 + tau = "
+                  "0.0055 rad); bound derived in tests/agents/test_open_loop.py"),
+        _row("Zero state: peak l_i", "0.75 at 0.5 orbit", _fmt(z["peak_length"], 4),
+             verdict=SHORT if half else _verdict(z["peak_length"], 0.75, 2e-3, 1e-2),
+             note="closed form l0 (1+e)/(1+e cos nu) = 0.75 (docs/model.md Eq. 7)"),
+        _row("Zero state: nu of the peak [rad]", "pi = 3.1416 (0.5 orbit)",
+             _fmt(z["peak_nu"], 5),
+             verdict=SHORT if half else _verdict(z["peak_nu"], math.pi, 2e-2, 5e-2),
+             note="lags pi by about the reel delay"),
+        _row("Zero state: length increase at the peak", "50 %",
+             _pct(z["peak_increase"]),
+             verdict=SHORT if half else _verdict(z["peak_increase"], 0.5, 5e-3, 2e-2)),
+        _row("Zero state: l_i after 1 orbit vs l_i(0)", "back to l_i(0)",
+             _pct(z["length_after_one_orbit_rel"]),
+             verdict=_verdict(z["length_after_one_orbit_rel"], 0.0, 1e-3, 1e-2)),
+    ]
+
+
+def _zero_state_tension_rows(res: dict) -> list:
+    """Eq. 7 from the zero state: the tensions against the closed form (Fig. 4)."""
+    z = res["zero_state"]
     whole = _short(res, 1.0)
-    rows.append(_row("Zero state (Eq. 7): max abs(theta_i) over the run [rad]", "0 (Fig. 2)",
-                     _fmt(z["max_abs_theta"]),
-                     verdict="reproduced" if z["max_abs_theta"] < 1e-2 else "not reproduced",
-                     note="residual of the zero-order hold + reel lag (delay h_c/2 + tau = "
-                          "0.0055 rad); bound derived in tests/agents/test_open_loop.py"))
-    rows.append(_row("Zero state: peak l_i", "0.75 at 0.5 orbit", _fmt(z["peak_length"], 4),
-                     verdict=SHORT if half else _verdict(z["peak_length"], 0.75, 2e-3, 1e-2),
-                     note="closed form l0 (1+e)/(1+e cos nu) = 0.75 (docs/model.md Eq. 7)"))
-    rows.append(_row("Zero state: nu of the peak [rad]", "pi = 3.1416 (0.5 orbit)",
-                     _fmt(z["peak_nu"], 5),
-                     verdict=SHORT if half else _verdict(z["peak_nu"], math.pi, 2e-2, 5e-2),
-                     note="lags pi by about the reel delay"))
-    rows.append(_row("Zero state: length increase at the peak", "50 %",
-                     _pct(z["peak_increase"]),
-                     verdict=SHORT if half else _verdict(z["peak_increase"], 0.5, 5e-3, 2e-2)))
-    rows.append(_row("Zero state: l_i after 1 orbit vs l_i(0)", "back to l_i(0)",
-                     _pct(z["length_after_one_orbit_rel"]),
-                     verdict=_verdict(z["length_after_one_orbit_rel"], 0.0, 1e-3, 1e-2)))
+    rows = []
     for j, name in enumerate(("T^_1", "T^_2")):
         cf = z["tension_range_closed_form"][j]
         dev = z["tension_closed_form_max_rel_dev_paper_procedure"]
@@ -87,7 +103,14 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                  f"{100 * dev:.2g} % (paper's procedure), {100 * dev_env:.2g} % (env sample: "
                  "the lagging reel shows ~0.9 of the law's l'' at step ends); at nu = 0 the "
                  f"reels start from l'' = 0 ({100 * z['tension_start_rel_dev_env']:.2g} %)"))
+    return rows
+
+
+def _fig5_rows(res: dict) -> list:
+    """Fig. 5: the swing at e = 0.2 for each amplitude."""
     f5 = res["fig5"]
+    whole = _short(res, 1.0)
+    rows = []
     for a, paper_pct, notes_pct in ((0.1, 24, 22), (0.2, 2, 3), (0.3, 18, 19)):
         m = f5[f"{a:g}"]
         rows.append(_row(
@@ -98,6 +121,13 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                  + ("; the paper's '0.01 ... 2 %' matches half the peak-to-peak in l "
                     f"({_fmt(m['half_swing_abs'], 2)}), not the 24 % / 18 % measure"
                     if a == 0.2 else "")))
+    return rows
+
+
+def _swing_scan_rows(res: dict) -> list:
+    """Eq. 11b: the amplitude that minimises the swing, from the scans."""
+    whole = _short(res, 1.0)
+    rows = []
     for scan, paper_a, notes_a in zip(res["scans"], (0.2, 0.5), (0.197, 0.441), strict=True):
         e = scan["eccentricity"]
         rows.append(_row(
@@ -107,9 +137,16 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             verdict=SHORT if whole else _verdict(scan["argmin"], paper_a, 2e-3, 1e-2),
             note=f"docs/model.md: ~{notes_a}: Eq. 11b's A = e is not the minimiser, and the "
                  f"gap grows with e; {scan['evaluations']} runs"))
+    return rows
+
+
+def _fig6_rows(res: dict) -> list:
+    """Fig. 6 (e = 0.7): the length change magnitudes, their trend and the slack."""
     f6 = res["fig6"]
+    whole = _short(res, 1.0)
     a_min = min(f6, key=lambda k: f6[k]["swing_abs_quadrature"])
     slack = [k for k in f6 if f6[k]["failure"] == "slack"]
+    rows = []
     for amp, paper_val in (("0.5", 0.1), ("0.9", 0.3)):
         m = f6[amp]
         rows.append(_row(
@@ -134,11 +171,17 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                      verdict=(SHORT if whole and not slack else
                               "reproduced" if slack else "not reproduced"),
                      note="the env terminates on T^ <= 0; see the positivity rows"))
+    return rows
+
+
+def _positivity_rows(res: dict) -> list:
+    """Sec. 3.2: the polynomial's sign against the env's and the model's tension."""
     pos = res["positivity"]
+    whole = _short(res, 1.0)
     cases = pos["cases"]
     model_ok = sum((c["polynomial"] > 0) == (c["model_min_tension"] > 0) for c in cases)
     env_bad = [c for c in cases if not c["agree"]]
-    rows.append(_row(
+    rows = [_row(
         "Sec. 3.2 polynomial > 0 vs min T^ > 0 over one orbit (sign agreement)",
         "polynomial > 0 <=> no slack",
         f"env runs {pos['agreement']}; model on the exact reference {model_ok}/{len(cases)}",
@@ -148,7 +191,7 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
             f"T^={c['model_min_tension']:.3f})" for c in env_bad) or "none")
         + ". Near the boundary min T^ changes by ~3.5 per unit A, so the env reel's "
           "tension dips (module docstring) move the boundary by ~0.02; docs/model.md: the "
-          "polynomial is the last tether's tension at apogee only"))
+          "polynomial is the last tether's tension at apogee only")]
     for r in pos["roots"]:
         model_gap = (None if r["model_root"] is None
                      else r["model_root"] - r["polynomial_root"])
@@ -165,28 +208,38 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                   if model_gap is not None and model_gap < -2e-3 else
                   "model: polynomial boundary exact (apogee is the minimum)")
             + "; docs/model.md: agrees up to e = 0.5, slightly too permissive at 0.7"))
+    return rows
+
+
+def _both(res: dict, key: str, fmt=_fmt) -> tuple[str, str]:
+    """``key`` of the sliding-mode numbers at the paper's and at the default step."""
+    return fmt(res["smc_paper"][key]), fmt(res["smc_default"][key])
+
+
+def _converged_in_orbit_1(m: dict) -> bool:
+    return m["convergence_orbits"] is not None and m["convergence_orbits"] < 1.0
+
+
+def _smc_tracking_rows(res: dict) -> list:
+    """Sliding mode (Figs. 7-9): convergence, error, total length and tension."""
     sp, sd = res["smc_paper"], res["smc_default"]
-
-    def both(key, fmt=_fmt):
-        return fmt(sp[key]), fmt(sd[key])
-
-    def conv_ok(m):
-        return m["convergence_orbits"] is not None and m["convergence_orbits"] < 1.0
-
-    c1, c2 = both("convergence_orbits")
+    whole = _short(res, 1.0)
+    rows = []
+    c1, c2 = _both(res, "convergence_orbits")
     rows.append(_row("SMC: convergence time, max abs(theta - theta_d) < 1e-3 for good [orbits]",
                      "by the end of orbit 1 (Fig. 7)", c1, c2,
                      verdict=(SHORT if whole else
-                              "reproduced" if conv_ok(sp) and conv_ok(sd) else
+                              "reproduced"
+                              if _converged_in_orbit_1(sp) and _converged_in_orbit_1(sd) else
                               "not reproduced")))
-    e1, e2 = both("max_error_after_orbit_1")
+    e1, e2 = _both(res, "max_error_after_orbit_1")
     rows.append(_row("SMC: max abs(theta_i - theta_d) after orbit 1 [rad]",
                      "converged (Fig. 7)", e1, e2,
                      verdict=(SHORT if sp["max_error_after_orbit_1"] is None else
                               "reproduced" if max(sp["max_error_after_orbit_1"],
                                                   sd["max_error_after_orbit_1"]) < 1e-3
                               else "not reproduced")))
-    s1, s2 = both("mean_total_length_after_orbit_1", lambda x: _fmt(x, 4))
+    s1, s2 = _both(res, "mean_total_length_after_orbit_1", lambda x: _fmt(x, 4))
     worst = (None if sp["mean_total_length_after_orbit_1"] is None else
              max(abs(sp["mean_total_length_after_orbit_1"] - 0.9),
                  abs(sd["mean_total_length_after_orbit_1"] - 0.9)))
@@ -194,28 +247,35 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                      verdict=_verdict(worst, 0.0, 0.02, 0.05),
                      note="set by L0 through the accel limit (docs/model.md: 20 km); see the "
                           "L0 rows"))
-    t1, t2 = both("min_tension")
+    t1, t2 = _both(res, "min_tension")
     rows.append(_row("SMC: min T^ over the run", "> 0 (Fig. 9)", t1, t2,
                      verdict="reproduced" if min(sp["min_tension"], sd["min_tension"]) > 0
                      else "not reproduced"))
+    return rows
+
+
+def _chattering_text(c) -> str:
+    if c is None:
+        return "n/a"
+    return (f"TV {c['tv_per_orbit']:.3g}/orbit, HF fraction {c['hf_fraction']:.2g}, "
+            f"{c['extrema_per_orbit']:.1f} extrema/orbit")
+
+
+def _smc_command_rows(res: dict) -> list:
+    """Sliding mode: chattering, rate saturation, length split and reel acceleration."""
+    sp, sd = res["smc_paper"], res["smc_default"]
     ch_p, ch_d = sp["chattering"], sd["chattering"]
-
-    def chat(c):
-        if c is None:
-            return "n/a"
-        return (f"TV {c['tv_per_orbit']:.3g}/orbit, HF fraction {c['hf_fraction']:.2g}, "
-                f"{c['extrema_per_orbit']:.1f} extrema/orbit")
-
     smooth = [c is not None and c["hf_fraction"] < 0.05 and c["extrema_per_orbit"] < 10
               for c in (ch_p, ch_d)]
-    rows.append(_row("SMC: chattering of the reel-rate command after convergence",
-                     "small, bounded chattering in each period", chat(ch_p), chat(ch_d),
-                     verdict=(SHORT if ch_p is None or ch_d is None else
-                              "not reproduced" if all(smooth) else "reproduced"),
-                     note=("no chattering: with the boundary layer and exact f, B the "
-                           "converged control is smooth (docs/model.md)" if all(smooth) else
-                           "high-frequency content found")))
-    sat1, sat2 = both("saturated_command_steps", str)
+    rows = [_row("SMC: chattering of the reel-rate command after convergence",
+                 "small, bounded chattering in each period",
+                 _chattering_text(ch_p), _chattering_text(ch_d),
+                 verdict=(SHORT if ch_p is None or ch_d is None else
+                          "not reproduced" if all(smooth) else "reproduced"),
+                 note=("no chattering: with the boundary layer and exact f, B the "
+                       "converged control is smooth (docs/model.md)" if all(smooth) else
+                       "high-frequency content found"))]
+    sat1, sat2 = _both(res, "saturated_command_steps", str)
     rows.append(_row("SMC: steps with the command at the env's rate cap (abs(action) = 1)",
                      "no rate cap", sat1, sat2, verdict="—",
                      note="max_reel_rate = 0.5 clips the first steps' command; the accel "
@@ -228,11 +288,17 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
                      verdict="—", note="the split l_1 : l_2 is internal dynamics the law "
                                        "leaves free (docs/model.md); it moves from 0.5 : 0.5 to "
                                        "about 0.28 : 0.61 during the transient"))
-    a1, a2 = both("max_reel_accel_over_limit")
+    a1, a2 = _both(res, "max_reel_accel_over_limit")
     rows.append(_row("SMC: max abs(L_ddot) / 0.01 m/s^2", "<= 1 (Sec. 4.3 limit)", a1, a2,
                      verdict="—", note="the env enforces the limit; it binds"))
+    return rows
+
+
+def _l0_rows(res: dict) -> list:
+    """docs/model.md's L0 = 20 km: the accel bound and the SMC's total length per L0."""
     trend = ", ".join(f"{_fmt(r['mean_total_length'], 3)} ({r['L0_km']:g} km)"
                       for r in res["l0_sweep"] if r["mean_total_length"] is not None)
+    rows = []
     for row in res["l0_sweep"]:
         fail = (f"{row['failure']} at {row['duration_orbits']:.3f} orbit"
                 if row["failure"] else "no failure")
@@ -250,7 +316,46 @@ def _build_rows(res: dict) -> list:  # noqa: C901 - one row after the other
     return rows
 
 
-def _markdown(res: dict, rows: list) -> str:
+ROW_GROUPS = (_zero_state_rows, _zero_state_tension_rows, _fig5_rows, _swing_scan_rows,
+              _fig6_rows, _positivity_rows, _smc_tracking_rows, _smc_command_rows, _l0_rows)
+"""The table's groups of rows, in table order: each maps the numbers to a list of rows."""
+
+
+def build_rows(res: dict) -> list:
+    """The table's rows from the studies' numbers.
+
+    Parameters
+    ----------
+    res : dict
+        The numbers of every study, keyed as :func:`~.cli.reproduce` writes them
+        (``orbits``, ``zero_state``, ``fig5``, ``scans``, ``fig6``, ``positivity``,
+        ``smc_paper``, ``smc_default``, ``l0_sweep``).
+
+    Returns
+    -------
+    list of dict
+        One dict per row with the keys ``quantity``, ``paper``, ``tether_gym``,
+        ``tether_gym_default_step``, ``verdict`` and ``note`` (all str).
+    """
+    return [row for group in ROW_GROUPS for row in group(res)]
+
+
+def markdown(res: dict, rows: list) -> str:
+    """The ``paper_vs_tether_gym.md`` page: header, settings, the table and the figures.
+
+    Parameters
+    ----------
+    res : dict
+        The numbers of every study, with ``runtime_s`` [s], ``quick``, ``orbits`` and
+        ``figures`` (the PNG file names).
+    rows : list of dict
+        The rows of :func:`build_rows`.
+
+    Returns
+    -------
+    str
+        The Markdown text (cells escape ``|``).
+    """
     lines = [
         "# Shi, Zhu & Zhu (2019) vs tether_gym",
         "",

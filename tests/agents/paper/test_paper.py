@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
+import ast
 import json
 import math
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from tether_gym_agents import paper
-from tether_gym_agents.evaluation import benchmark as evaluation
+from tether_gym_agents.paper import cli as paper_cli
+from tether_gym_agents.paper import figures, table
+
+REPO = Path(__file__).resolve().parents[3]
+PAPER_DIR = Path(paper.__file__).resolve().parent
+SHIPPED = REPO / "docs" / "paper"
 
 FIGURES = (
     "fig2_zero_state_angles.png",
@@ -28,7 +35,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
     out = tmp_path_factory.mktemp("paper")
-    code = evaluation.main(["paper", "--out", str(out), "--orbits", "0.2", "--quick"])
+    code = paper_cli.main(["--out", str(out), "--orbits", "0.2", "--quick"])
     return code, out
 
 
@@ -143,3 +150,109 @@ def test_chattering_separates_smooth_and_switching_commands():
     assert c["hf_fraction"] > 0.9
     assert c["extrema_per_orbit"] > 0.9 / h
     assert paper.chattering(t, smooth, start=1.9) is None  # too short a window
+
+
+# --------------------------------------------------------------------------- #
+# the table, the figures and the command line as parts
+# --------------------------------------------------------------------------- #
+def test_shipped_table_is_rebuilt_from_its_own_numbers():
+    """docs/paper: every row and the whole page follow from the JSON's numbers alone.
+
+    The full-mode table (34 rows) exercises every row group with the paper's durations;
+    a change to a row's text or verdict shows here without a full reproduction.
+    """
+    result = json.loads((SHIPPED / "paper_vs_tether_gym.json").read_text())
+    rows = table.build_rows(result)
+    assert rows == result["table"]
+    assert table.markdown(result, rows) == (SHIPPED / "paper_vs_tether_gym.md").read_text()
+
+
+def test_short_run_table_is_rebuilt_from_its_json(short_run):
+    """The same for the shortened run, whose rows read 'n/a (run too short)'."""
+    _, out = short_run
+    result = json.loads((out / "paper_vs_tether_gym.json").read_text())
+    rows = table.build_rows(result)
+    assert rows == result["table"]
+    assert table.markdown(result, rows) == (out / "paper_vs_tether_gym.md").read_text()
+    assert sum(r["verdict"] == table.SHORT for r in rows) >= 10
+
+
+def test_row_groups_are_in_table_order():
+    result = json.loads((SHIPPED / "paper_vs_tether_gym.json").read_text())
+    sizes = [len(group(result)) for group in table.ROW_GROUPS]
+    assert sum(sizes) == len(result["table"]) and all(n > 0 for n in sizes)
+    firsts = [group(result)[0]["quantity"] for group in table.ROW_GROUPS]
+    positions = [[r["quantity"] for r in result["table"]].index(q) for q in firsts]
+    assert positions == sorted(positions) and positions[0] == 0
+
+
+def test_draw_writes_the_figures_in_order(short_run):
+    _, out = short_run
+    result = json.loads((out / "paper_vs_tether_gym.json").read_text())
+    assert result["figures"] == [*FIGURES, "fig_extra_swing_scan.png"]
+    assert list(figures.FigureInputs._fields) == ["zero", "fig5", "fig6", "fig6_quadrature",
+                                                  "scans", "smc_paper", "smc_default"]
+
+
+def test_add_arguments_and_run_are_the_paper_command(tmp_path, monkeypatch):
+    """The agents' command line builds ``evaluate.py paper`` from these two functions."""
+    import argparse
+
+    calls = []
+    monkeypatch.setattr(paper_cli, "reproduce",
+                        lambda out, orbits=None, quick=False: calls.append((out, orbits, quick)))
+    parser = paper_cli.add_arguments(argparse.ArgumentParser())
+    args = parser.parse_args(["--out", str(tmp_path), "--orbits", "0.5", "--quick"])
+    assert paper_cli.run(args) == 0
+    assert calls == [(str(tmp_path), 0.5, True)]
+
+
+# --------------------------------------------------------------------------- #
+# the package's shape (issue 23)
+# --------------------------------------------------------------------------- #
+def _modules():
+    return sorted(PAPER_DIR.glob("*.py"))
+
+
+def _tree(path):
+    return ast.parse(path.read_text(), filename=str(path))
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: p.name)
+def test_no_private_name_of_a_sibling_is_imported(path):
+    private = [f"from {'.' * node.level}{node.module or ''} import {alias.name}"
+               for node in ast.walk(_tree(path)) if isinstance(node, ast.ImportFrom)
+               for alias in node.names if alias.name.startswith("_")]
+    assert private == []
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: p.name)
+def test_functions_are_at_most_60_lines(path):
+    long = [f"{node.name}: {node.end_lineno - node.lineno + 1} lines"
+            for node in ast.walk(_tree(path))
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef))
+            and node.end_lineno - node.lineno + 1 > 60]
+    assert long == []
+
+
+ALLOWED_SUBPACKAGES = {"common", "baselines", "evaluation"}
+
+
+@pytest.mark.parametrize("path", _modules(), ids=lambda p: p.name)
+def test_paper_imports_only_downhill(path):
+    """paper uses common, baselines, evaluation and tether_gym; never training, files, cli."""
+    bad = []
+    for node in ast.walk(_tree(path)):
+        if isinstance(node, ast.ImportFrom) and node.level >= 2:
+            sub = (node.module or "").split(".")[0]
+            if node.level > 2 or sub not in ALLOWED_SUBPACKAGES:
+                bad.append(f"{'.' * node.level}{node.module or ''}")
+        names = ([a.name for a in node.names] if isinstance(node, ast.Import) else
+                 [node.module or ""] if isinstance(node, ast.ImportFrom) and not node.level
+                 else [])
+        for name in names:
+            parts = name.split(".")
+            if parts[0] == "tether_gym_agents" and (
+                    len(parts) < 2 or parts[1] not in ALLOWED_SUBPACKAGES | {"paper"}):
+                bad.append(name)
+    assert bad == []
