@@ -35,7 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from llvmlite import ir
 from numba import njit, types
-from numba.core.extending import intrinsic
+from numba.extending import intrinsic
 
 from ..physics.jit import INLINE, LOOP
 

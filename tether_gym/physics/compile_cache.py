@@ -10,8 +10,8 @@ function compiled with ``cache=True`` in a file of the tether_gym package:
 * **Key.** The source stamp of every such function is :func:`source_stamp`: a sha256 of
   every ``.py`` file of the package (paths and contents) and ``tether_gym.__version__``.
   Any edit of any package source, and any upgrade or downgrade, invalidates every cached
-  kernel; numba then recompiles and overwrites the cache files. Hashing the ~140 kB of
-  source takes about 2 ms, once per process.
+  kernel; numba then recompiles and overwrites the cache files. The source is hashed
+  once per process.
 * **Place.** The first writable one of: ``NUMBA_CACHE_DIR`` (if set), the package's own
   ``__pycache__`` directories, ``$XDG_CACHE_HOME/tether_gym`` (default
   ``~/.cache/tether_gym``). Writability is tested by creating a file (permission bits
@@ -23,11 +23,10 @@ function compiled with ``cache=True`` in a file of the tether_gym package:
   entry), one line goes to stderr before the compile and one with its duration after it.
   A warm cache compiles nothing and prints nothing.
 
-The mechanism uses numba internals that exist in numba 0.59 to 0.68
-(``numba.core.caching``: ``_CacheLocator``, ``CacheImpl._locator_classes`` (``_CacheImpl``
-in older releases), ``numba.core.dispatcher.Dispatcher.enable_caching``) and the
-public event API ``numba.core.event``. If they are missing, the kernels are compiled in
-memory with a :class:`CompileCacheWarning` instead of risking a stale cache.
+The mechanism uses numba's cache internals, all reached through
+:mod:`tether_gym.physics.numba_private` (which lists them), and the public event API
+``numba.core.event``. If the internals are missing, the kernels are compiled in memory
+with a :class:`CompileCacheWarning` instead of risking a stale cache.
 """
 
 from __future__ import annotations
@@ -42,6 +41,8 @@ import warnings
 from dataclasses import dataclass
 
 from numba.core import event
+
+from . import numba_private
 
 __all__ = ["CompileCacheWarning", "CacheState", "install", "state", "source_stamp",
            "find_cache_dir", "writable"]
@@ -175,54 +176,6 @@ def state() -> CacheState | None:
     return _STATE
 
 
-def _caching_internals():
-    """numba's cache locator base and the list of locator classes, or a reason why not."""
-    try:
-        from numba.core import caching
-        from numba.core.dispatcher import Dispatcher
-    except ImportError as exc:  # pragma: no cover - depends on numba's layout
-        return None, f"numba.core.caching is missing ({exc})"
-    base = getattr(caching, "_CacheLocator", None)
-    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
-    classes = getattr(impl, "_locator_classes", None)
-    if base is None or not isinstance(classes, list) or not hasattr(Dispatcher,
-                                                                     "enable_caching"):
-        return None, (f"numba {getattr(sys.modules.get('numba'), '__version__', '?')} "
-                      "lacks the cache internals tether_gym uses (numba.core.caching."
-                      "_CacheLocator, CacheImpl._locator_classes, Dispatcher.enable_caching)")
-    return (base, classes, Dispatcher), ""
-
-
-def _make_locator(base):
-    """A numba cache locator for the package's files, built on numba's ``base``."""
-
-    class PackageCacheLocator(base):
-        """Locates tether_gym's cached kernels; stamp = the whole package's source."""
-
-        def __init__(self, py_func, py_file):
-            self._py_file = py_file
-            self._lineno = py_func.__code__.co_firstlineno
-            self._cache_path = _STATE.cache_path(py_file,
-                                                 self.get_suitable_cache_subpath(py_file))
-
-        def get_cache_path(self):
-            return self._cache_path
-
-        def get_source_stamp(self):
-            return _STATE.stamp
-
-        def get_disambiguator(self):
-            return str(self._lineno)
-
-        @classmethod
-        def from_function(cls, py_func, py_file):
-            if _STATE is None or not _STATE.enabled or not _STATE.covers(py_file):
-                return None
-            return cls(py_func, py_file)
-
-    return PackageCacheLocator
-
-
 class _CompileAnnouncer(event.Listener):
     """numba ``"numba:compile"`` listener: a line on stderr around each compile burst.
 
@@ -286,7 +239,7 @@ def install(package_dir: str = PACKAGE_DIR, version: str | None = None) -> Cache
     if version is None:
         from .. import __version__ as version
     stamp = source_stamp(package_dir, str(version))
-    internals, reason = _caching_internals()
+    internals, reason = numba_private.cache_internals()
     kind = root = None
     tried: list[str] = []
     if internals is not None:
@@ -296,10 +249,10 @@ def install(package_dir: str = PACKAGE_DIR, version: str | None = None) -> Cache
                       + ", the last from XDG_CACHE_HOME or HOME)")
     _STATE = CacheState(package_dir, stamp, kind, root, tried, reason)
     if internals is not None:
-        base, classes, _dispatcher = internals
-        classes.insert(0, _make_locator(base))
+        base, classes = internals
+        classes.insert(0, numba_private.make_locator(base, state))
     if not _STATE.enabled:
-        _disable_caching_for_package()
+        numba_private.disable_caching(_STATE.covers)
         fix = ("set the environment variable NUMBA_CACHE_DIR to a writable directory"
                if internals is not None else "use numba 0.59 to 0.68")
         warnings.warn(
@@ -315,21 +268,3 @@ def install(package_dir: str = PACKAGE_DIR, version: str | None = None) -> Cache
             CompileCacheWarning, stacklevel=2)
     event.register("numba:compile", _CompileAnnouncer(_STATE))
     return _STATE
-
-
-def _disable_caching_for_package() -> None:
-    """Make ``cache=True`` a no-op (in-memory compile) for the package's functions."""
-    from numba.core.dispatcher import Dispatcher
-
-    original = Dispatcher.enable_caching
-
-    def enable_caching(self):
-        try:
-            ours = _STATE.covers(inspect.getfile(self.py_func))
-        except TypeError:
-            ours = False
-        if not ours:
-            original(self)
-
-    enable_caching.__doc__ = original.__doc__
-    Dispatcher.enable_caching = enable_caching  # type: ignore[method-assign]

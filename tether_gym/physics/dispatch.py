@@ -1,16 +1,18 @@
 """Calling a compiled kernel without numba's per-call type dispatch.
 
 numba's dispatcher works out the numba type of every argument on every call. For
-arrays and plain tuples it has a fast path; for named tuples it falls back to Python
-and costs about 10 us per call, more than a whole single-env step. The callers of
-:class:`Direct` pass arguments whose types never change (arrays they allocated
-themselves, with fixed dtypes, dimensions and C order), so the compiled entry point
-found on the first call serves every later call.
+arrays and plain tuples it has a fast path; for named tuples it falls back to Python,
+which costs more than a whole single-env step (figures: ``bench/README.md``). The
+callers of :class:`Direct` pass arguments whose types never change (arrays they
+allocated themselves, with fixed dtypes, dimensions and C order), so the compiled entry
+point found on the first call serves every later call.
 """
 
 from __future__ import annotations
 
 from typing import Any
+
+from . import numba_private
 
 __all__ = ["Direct"]
 
@@ -28,9 +30,9 @@ class Direct:
     The first call goes through the dispatcher (compiling or loading from the cache)
     and records the entry point of the signature it resolved. Every argument of a
     later call must have the same numba type (dtype, ndim, layout, tuple structure)
-    as in that first call: the entry point does not check it. Without the private
-    attributes this relies on (``overloads``, ``entry_point``) every call goes
-    through the dispatcher.
+    as in that first call: the entry point does not check it. Where numba's private
+    attributes this relies on have moved (:func:`.numba_private.entry_point`), every
+    call goes through the dispatcher.
     """
 
     def __init__(self, dispatcher: Any):
@@ -44,9 +46,6 @@ class Direct:
         if entry is not None:
             return entry(*args)
         result = self._dispatcher(*args)
-        try:
-            sig = tuple(self._dispatcher.typeof_pyval(a) for a in args)
-            self._entry = self._dispatcher.overloads[sig].entry_point
-        except (AttributeError, KeyError):  # pragma: no cover - numba internals moved
-            self._entry = self._dispatcher
+        entry = numba_private.entry_point(self._dispatcher, args)
+        self._entry = self._dispatcher if entry is None else entry
         return result

@@ -4,13 +4,13 @@
 diverging state is caught by the non-finite checks rather than by an exception).
 
 ``LOOP``: ``KERNEL`` without NRT, numba's reference-counting runtime (``_nrt=False``,
-an option numba has long had but keeps private). Used for the batch loops and the
-RK4 stepper, which allocate nothing: with NRT, numba emits an atomic incref and
-decref for every array argument, view and tuple element it binds, and these took
-41 % of the samples of ``perf`` on the 256-env step kernel; without it the same
-arithmetic runs about 2.5x faster with bitwise-identical results. A ``LOOP``
-function cannot allocate arrays: its ``KERNEL`` or Python caller owns every array
-it touches (the scratch comes from :func:`tether_gym.physics.kernels.make_scratch`).
+an option numba keeps private: :data:`tether_gym.physics.numba_private.NO_NRT`). Used
+for the batch loops and the RK4 stepper, which allocate nothing: with NRT, numba emits
+an atomic incref and decref for every array argument, view and tuple element it binds,
+which dominated the profile of the many-env step kernel; without it the same
+arithmetic runs faster with bitwise-identical results (figures: ``bench/README.md``).
+A ``LOOP`` function cannot allocate arrays: its ``KERNEL`` or Python caller owns every
+array it touches (the scratch comes from :func:`tether_gym.physics.kernels.make_scratch`).
 
 ``INLINE``: ``KERNEL`` inlined into the caller at numba IR level (the small hot
 helpers); an inlined function runs under its caller's options.
@@ -32,7 +32,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from . import compile_cache
+from . import compile_cache, numba_private
 
 __all__ = ["KERNEL", "LOOP", "INLINE", "CACHE"]
 
@@ -40,5 +40,5 @@ CACHE = compile_cache.install()
 """Where and under which key the kernels are cached (:class:`~.compile_cache.CacheState`)."""
 
 KERNEL: dict[str, Any] = {"cache": True, "error_model": "numpy"}
-LOOP: dict[str, Any] = {**KERNEL, "_nrt": False}
+LOOP: dict[str, Any] = {**KERNEL, **numba_private.NO_NRT}
 INLINE: dict[str, Any] = {**KERNEL, "inline": "always"}
