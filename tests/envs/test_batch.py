@@ -133,3 +133,35 @@ def test_failed_start_is_each_bound_with_its_own_strictness():
         batch.rows.tension[b] = [tension, 1.0]
     failed = batch._failed_at_start(np.arange(len(cases)))
     assert failed.tolist() == [want for _, want in cases]
+
+
+def test_start_plan_fields_hold_the_configs_values():
+    """StartPlan is built by keyword: each named field holds the config value of its name
+    (distinct values, so a field filled from its neighbour would show)."""
+    from tether_gym.envs.batch import StartPlan
+
+    config = EnvConfig.from_kwargs(n_bodies=3, eccentricity=0.15, masses=(1.0, 3.0),
+                                   mass_range=0.2, obs_noise=2e-3, init_theta_range=0.07,
+                                   init_dtheta_range=0.03, init_length_range=0.11)
+    plan = StartPlan.of(config)
+    rnd = config.randomisation
+    assert plan.eccentricity == config.eccentricity
+    assert np.array_equal(plan.masses, np.asarray(config.masses, dtype=float))
+    assert plan.randomised is config.randomised
+    assert plan.eccentricity_range == rnd.eccentricity_range
+    assert plan.mass_range == rnd.mass_range == 0.2
+    assert plan.obs_noise == rnd.obs_noise == 2e-3
+    assert plan.init_dtheta_range == rnd.init_dtheta_range == 0.03
+    assert (plan.amplitude, plan.frequency) == (config.amplitude, config.frequency)
+    assert plan.nu0 == float(config.initial_nu)
+    assert plan.episode_length == config.episode_length
+    n = config.n_tethers
+    ones = np.ones(n)
+    assert np.array_equal(plan.start_spread, np.concatenate(
+        [0.07 * ones, 0.03 * ones, 0.11 * ones]))
+    assert np.array_equal(plan.start_base[:n], np.asarray(config.initial_theta, dtype=float))
+    assert np.array_equal(plan.start_base[n:2 * n], plan.dref * ones)
+    assert np.array_equal(plan.start_base[2 * n:],
+                          np.asarray(config.initial_lengths, dtype=float))
+    assert np.all(plan.state_low < plan.state_high) and plan.state_low.size == 4 * n
+    assert plan.eq10 is not None and len(plan.eq10) == 2

@@ -191,15 +191,28 @@ class StartPlan(NamedTuple):
         bounds = {"theta": (-0.5 * np.pi, 0.5 * np.pi), "dtheta": (-np.inf, np.inf),
                   "length": (np.nextafter(lo, -np.inf), np.nextafter(hi, np.inf)),
                   "dlength": (-np.inf, np.inf)}
-        return cls(config.eccentricity, np.asarray(config.masses, dtype=float),
-                   config.randomised, rnd.eccentricity_range, rnd.mass_range, rnd.obs_noise,
-                   rnd.init_dtheta_range, amplitude, frequency, nu0, ref, dref, eq10,
-                   config.episode_length, STATE.slices(n),
-                   np.concatenate([theta0, dref * ones, lengths0]),
-                   np.concatenate([rnd.init_theta_range * ones, rnd.init_dtheta_range * ones,
-                                   rnd.init_length_range * ones]),
-                   np.concatenate([bounds[name][0] * ones for name in STATE.names]),
-                   np.concatenate([bounds[name][1] * ones for name in STATE.names]))
+        return cls(
+            eccentricity=config.eccentricity,
+            masses=np.asarray(config.masses, dtype=float),
+            randomised=config.randomised,
+            eccentricity_range=rnd.eccentricity_range,
+            mass_range=rnd.mass_range,
+            obs_noise=rnd.obs_noise,
+            init_dtheta_range=rnd.init_dtheta_range,
+            amplitude=amplitude,
+            frequency=frequency,
+            nu0=nu0,
+            ref=ref,
+            dref=dref,
+            eq10=eq10,
+            episode_length=config.episode_length,
+            slices=STATE.slices(n),
+            start_base=np.concatenate([theta0, dref * ones, lengths0]),
+            start_spread=np.concatenate([rnd.init_theta_range * ones,
+                                         rnd.init_dtheta_range * ones,
+                                         rnd.init_length_range * ones]),
+            state_low=np.concatenate([bounds[name][0] * ones for name in STATE.names]),
+            state_high=np.concatenate([bounds[name][1] * ones for name in STATE.names]))
 
 
 class ChainBatch:
@@ -318,7 +331,7 @@ class ChainBatch:
         tension T^_i <= 0.
 
         (Checked here rather than in the compiled reset, where it was tried: it saved
-        20 us per reset call but added to the compile time of every cold start.)
+        some Python per reset call but added to the compile time of every cold start.)
         """
         plan = self._plan
         y = self.rows.y[rows]

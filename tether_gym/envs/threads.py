@@ -5,9 +5,9 @@ compiled step (which releases the GIL) on each at once (``ChainBatch.step``). On
 cores that pays from a few dozen envs on. When the cores are shared with another
 CPU-bound process (a second training run, the common case of a seed fan-out), a chunk
 whose thread is descheduled holds the whole step for a scheduler time slice: numba's
-OpenMP threads, used before, were then measured 10-18x slower than one thread, their
-idle workers spinning and taking CPU from the other process
-(bench/threads_under_load.py). No static rule knows which case it is in, so
+OpenMP threads, used before, were then many times slower than one thread, their idle
+workers spinning and taking CPU from the other process (``bench/threads_under_load.py``;
+figures in ``bench/README.md``). No static rule knows which case it is in, so
 :class:`ThreadPolicy` measures:
 
 * **probe**: a few serial steps, then as many threaded steps; the median time per row

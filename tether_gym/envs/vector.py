@@ -80,9 +80,11 @@ class TetherLibrationVectorEnv(VectorEnv):
     ## Spaces
 
     ``single_observation_space`` and ``single_action_space`` are the single env's;
-    ``observation_space`` is ``Box(float32, (num_envs, 4(N-1)+4[+N]))`` and
-    ``action_space`` ``Box(-1, 1, (num_envs, N-1), float32)``. ``step`` takes a
-    (num_envs, N-1) array; a wrong shape or a NaN/inf entry raises ValueError.
+    ``observation_space`` is ``Box(float32, (num_envs, d))``, one single env's
+    observation (size d = ``single_observation_space.shape[0]``, given with its layout
+    in :class:`~tether_gym.envs.TetherLibrationEnv`) per row, and ``action_space``
+    ``Box(-1, 1, (num_envs, N-1), float32)``. ``step`` takes a (num_envs, N-1) array; a
+    wrong shape or a NaN/inf entry raises ValueError.
 
     ## Seeding and reset
 

@@ -2,16 +2,16 @@
 
 A worker hands its chunk to the compiled step without the GIL and without a wake-up:
 the worker thread sits in the compiled step itself (:func:`~.step_kernel.step_rows`
-called with a serving :class:`Relay`), which polls for the next chunk for about a
-millisecond after each one, yielding the core between polls (``sched_yield``), and only
-then returns to Python to block on a semaphore. The calling thread waits for the chunks
-in compiled code too (:func:`wait_done`). Waking a blocked thread cost 22-47 us on this
-project's 2-core virtual machine (the woken core had halted), about a fifth of a
-256-env step, and the woken thread then had to take the GIL from a caller that was still
-in Python; a polling worker starts its chunk within a microsecond (bench/README.md).
-Serving runs in the one compiled step (rather than in a function that calls it) so
-that the step is compiled once: a second compiled caller recompiles the whole step
-into itself, 8 s of a first threaded step with an empty cache.
+called with a serving :class:`Relay`), which polls for the next chunk up to
+:data:`POLLS` times after each one, yielding the core between polls (``sched_yield``),
+and only then returns to Python to block on a semaphore. The calling thread waits for
+the chunks in compiled code too (:func:`wait_done`). Waking a blocked thread costs a
+sizeable part of a many-env step when the woken core had halted, and the woken thread
+then has to take the GIL from a caller that is still in Python; a polling worker starts
+its chunk at once (figures: ``bench/README.md``). Serving runs in the one compiled step
+(rather than in a function that calls it) so that the step is compiled once: a second
+compiled caller would recompile the whole step into itself, lengthening the first
+threaded step with an empty cache.
 
 A job is described by a worker's int64 control array (slots :data:`GEN` ...
 :data:`STOP`): the caller writes the chunk's bounds into it and then increments the job
@@ -49,8 +49,7 @@ SLOTS = 8
 """Length of a control array [-]."""
 
 POLLS = 2000
-"""Polls (each a ``sched_yield``, about 0.5 us on an idle core) before an idle worker
-blocks [-]."""
+"""Polls (each a ``sched_yield``) before an idle worker blocks [-]."""
 
 
 class Relay(NamedTuple):
@@ -77,7 +76,7 @@ def yield_function() -> tuple[int, bool]:
     do-nothing stand-in (the compiled step needs some function) and False: the vector
     env then steps on one thread. An address (an int) rather than the ctypes function
     itself: numba converts a ctypes function argument through Python on every call,
-    2-3 us, more than the rest of a call of the single env's step.
+    which costs more than the rest of a call of the single env's step.
     """
     real = True
     fn: Any

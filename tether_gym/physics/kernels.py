@@ -108,7 +108,8 @@ class StepOutputs(NamedTuple):
 def make_scratch(n: int) -> Scratch:
     """Fresh :class:`Scratch` for n tethers (one per thread).
 
-    Plain Python: a compiled allocator cost 0.4 s of every cold start.
+    Plain Python: a compiled allocator would add to the compile time of every cold
+    start.
     """
     m = 4 * n
     return Scratch(np.empty((n, n)), np.empty((n, 1)), np.empty((7, n)), np.empty(n),
@@ -126,8 +127,8 @@ def make_scratch(n: int) -> Scratch:
 # compiled without it, see jit.py). The right-hand side and the step built from it
 # (controlled_rhs, advance_one) are compiled as functions of their own instead: numba's
 # IR-level inlining deep-copies the callee's IR at every level, and inlining these two
-# took 40 % of a cold start (12.7 s -> 8.7 s for import + make + reset + step with an
-# empty cache, measured under load), with bitwise-identical trajectories. The small
+# made up a large share of the cold start (figures: bench/README.md), while compiling
+# them apart keeps the trajectories bitwise identical. The small
 # sin_cos_nu, called from two files, is compiled with LOOP and left to LLVM to inline,
 # like physics.layout.at.
 @njit(**LOOP)
