@@ -1,11 +1,11 @@
 """Model-based policies built on a scenario's nominal model.
 
 The sliding-mode law, the safety filter, and the hybrids that combine them with a
-trained agent. Under model mismatch a scenario names the model that model-based controllers design on
-(``Scenario.nominal``); every builder here uses it, so that ``smc``, ``smc_filtered``,
-a residual hybrid and ``handover:AGENT`` all see the same model on a given scenario.
-Each builder takes ``(env, scenario)`` (plus the trained agent of a hybrid) and returns
-an object with stable-baselines3's ``predict``.
+trained agent. Under model mismatch a scenario names the model that model-based
+controllers design on (``Scenario.nominal``); every builder here uses it, so that
+``smc``, ``smc_filtered``, a residual hybrid and ``handover:AGENT`` all see the same
+model on a given scenario. Each builder takes ``(env, scenario)`` (plus the trained
+agent of a hybrid) and returns an object with stable-baselines3's ``predict``.
 """
 
 from __future__ import annotations

@@ -120,6 +120,44 @@ def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
     }
 
 
+STATISTICS = {
+    "point_estimate": "interquartile mean (scipy.stats.trim_mean, 25 % cut at each "
+                      "end) over runs x scenarios of each run's mean over its "
+                      "episodes; undefined episode values left out",
+    "ci95": f"95 % percentile interval of the IQM over {N_BOOTSTRAP} stratified "
+            "bootstrap resamples (runs drawn with replacement within each "
+            f"scenario, seed {BOOTSTRAP_SEED}); null with fewer than 2 runs",
+    "probability_of_improvement": f"P(policy improves on {REFERENCE_POLICY}) per "
+                                  "scenario over all pairs of runs (Mann-Whitney U / "
+                                  "(n_x n_y), ties 1/2), averaged over scenarios; "
+                                  "null if smc was not evaluated",
+    "higher_is_better": sorted(HIGHER_IS_BETTER),
+    "reference": "Agarwal et al. (2021), Deep RL at the Edge of the Statistical "
+                 "Precipice, NeurIPS",
+}
+"""How the numbers of results.json are computed (its ``statistics`` block)."""
+
+
+def _policy_block(spec, eps: list[dict], scores: dict, reference: dict | None,
+                  scenario_names: list) -> dict:
+    """One policy's entry of ``policies``: kind, runs, IQMs, intervals, P(improvement)."""
+    block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
+             "runs": [None if p is None else display_path(p) for p in spec.runs],
+             "env_kwargs": spec.env_kwargs, "n_episodes": len(eps)}
+    for m in METRICS:
+        block[m] = iqm(scores[m])
+    block["success_rate"] = block["success"]
+    block["ci95"] = {m: stratified_bootstrap_ci(scores[m]) for m in METRICS}
+    block["probability_of_improvement"] = {
+        m: (None if reference is None else probability_of_improvement(
+            scores[m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
+    block["failures"] = {f: int(sum(e[f] for e in eps)) for f in FAILURES}
+    if eps and all("filter_rate" in e for e in eps):  # a safety filter's interventions
+        block["filter_rate"] = iqm(run_scores(eps, "filter_rate", list(range(spec.n_runs)),
+                                              scenario_names))
+    return block
+
+
 def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_kwargs: dict,
                   suite: str, command: str | None = None,
                   torch_threads: int | None = None) -> dict:
@@ -129,24 +167,8 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
     scores = {s.name: {m: run_scores(by_policy[s.name], m, list(range(s.n_runs)),
                                      scenario_names) for m in METRICS} for s in specs}
     reference = scores.get(REFERENCE_POLICY)
-    policies = {}
-    for spec in specs:
-        eps = by_policy[spec.name]
-        block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
-                 "runs": [None if p is None else display_path(p) for p in spec.runs],
-                 "env_kwargs": spec.env_kwargs, "n_episodes": len(eps)}
-        for m in METRICS:
-            block[m] = iqm(scores[spec.name][m])
-        block["success_rate"] = block["success"]
-        block["ci95"] = {m: stratified_bootstrap_ci(scores[spec.name][m]) for m in METRICS}
-        block["probability_of_improvement"] = {
-            m: (None if reference is None else probability_of_improvement(
-                scores[spec.name][m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
-        block["failures"] = {f: int(sum(e[f] for e in eps)) for f in FAILURES}
-        if eps and all("filter_rate" in e for e in eps):  # a safety filter's interventions
-            block["filter_rate"] = iqm(run_scores(eps, "filter_rate", list(range(spec.n_runs)),
-                                                  scenario_names))
-        policies[spec.name] = block
+    policies = {spec.name: _policy_block(spec, by_policy[spec.name], scores[spec.name],
+                                         reference, scenario_names) for spec in specs}
     per_scenario = {
         sc: {spec.name: {**{m: iqm(scores[spec.name][m][:, j]) for m in METRICS},
                          "ci95": {m: stratified_bootstrap_ci(scores[spec.name][m][:, j:j + 1])
@@ -162,21 +184,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
                                          "env_kwargs": st.env_kwargs,
                                          "nominal": st.scenario.nominal}
                       for st in settings},
-        "statistics": {
-            "point_estimate": "interquartile mean (scipy.stats.trim_mean, 25 % cut at each "
-                              "end) over runs x scenarios of each run's mean over its "
-                              "episodes; undefined episode values left out",
-            "ci95": f"95 % percentile interval of the IQM over {N_BOOTSTRAP} stratified "
-                    "bootstrap resamples (runs drawn with replacement within each "
-                    f"scenario, seed {BOOTSTRAP_SEED}); null with fewer than 2 runs",
-            "probability_of_improvement": f"P(policy improves on {REFERENCE_POLICY}) per "
-                                          "scenario over all pairs of runs (Mann-Whitney U / "
-                                          "(n_x n_y), ties 1/2), averaged over scenarios; "
-                                          "null if smc was not evaluated",
-            "higher_is_better": sorted(HIGHER_IS_BETTER),
-            "reference": "Agarwal et al. (2021), Deep RL at the Edge of the Statistical "
-                         "Precipice, NeurIPS",
-        },
+        "statistics": dict(STATISTICS),
         "policies": policies,
         "per_scenario": per_scenario,
         "episodes": episodes,

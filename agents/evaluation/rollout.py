@@ -181,79 +181,125 @@ def _checked(action, policy, n_act: int, rows: int) -> np.ndarray:
     return action.reshape(rows, n_act)
 
 
-def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajectory]:
-    base = venv.unwrapped
-    if base.num_envs != len(seeds):
-        raise ValueError(f"env has {base.num_envs} sub-envs for {len(seeds)} seeds")
-    cfg = base.config
-    layout = ObservationLayout.from_env(base)
-    n_act = int(base.single_action_space.shape[0])
-    num = len(seeds)
-    obs, info = venv.reset(seed=seeds, options=options)
-    rows = {key: [np.array(info[key], dtype=float)] for key in RECORDED_KEYS + (_COMMAND,)}
-    actions_log, rewards_log = [], []
-    active = np.ones(num, dtype=bool)
-    end = np.zeros(num, dtype=np.int64)
-    failure: list[str | None] = [None] * num
-    truncated = np.zeros(num, dtype=bool)
-    actions = np.zeros((num, n_act), dtype=np.float32)
-    filtered: list[list[bool]] = [[] for _ in range(num)]
-    step = 0
-    states: list = [None] * num  # each episode's recurrent state row (None: none)
-    started = np.zeros(num, dtype=bool)
-    # a batch-invariant policy shared by several episodes gets their observations in
-    # one call (row i of the batch is bitwise row i alone); every other policy one each
+@dataclass
+class _Book:
+    """What the rollout keeps: every step's samples, and each episode's memory.
+
+    Per episode: where it ended and why, its recurrent state row, and the filter's flags.
+    """
+
+    rows: dict
+    end: np.ndarray
+    truncated: np.ndarray
+    failure: list
+    states: list
+    started: np.ndarray
+    filtered: list
+    actions: list = field(default_factory=list)
+    rewards: list = field(default_factory=list)
+
+    @classmethod
+    def start(cls, info: dict, num: int) -> _Book:
+        """The book of ``num`` episodes, with the reset ``info`` as row 0."""
+        return cls(rows={key: [np.array(info[key], dtype=float)]
+                         for key in RECORDED_KEYS + (_COMMAND,)},
+                   end=np.zeros(num, dtype=np.int64), truncated=np.zeros(num, dtype=bool),
+                   failure=[None] * num, states=[None] * num,
+                   started=np.zeros(num, dtype=bool), filtered=[[] for _ in range(num)])
+
+    def act(self, policy, idx: list[int], obs: np.ndarray, n_act: int) -> np.ndarray:
+        """``policy``'s actions (len(idx), n_act) for the episodes ``idx``, in one call.
+
+        Hands each episode its recurrent state row (and ``episode_start`` on its first
+        call), keeps the new rows and the filter's flags of the step.
+        """
+        held = [self.states[i] for i in idx]
+        state = None if any(h is None for h in held) else np.stack(held)
+        action, new_state = policy.predict(obs[idx], state=state,
+                                           episode_start=~self.started[idx],
+                                           deterministic=True)
+        self.started[idx] = True
+        checked = _checked(action, policy, n_act, len(idx))
+        if new_state is not None:
+            for j, i in enumerate(idx):
+                self.states[i] = np.asarray(new_state)[j]
+        flag = getattr(policy, "last_filter_active", None)
+        if flag is not None:
+            for i, f in zip(idx, np.asarray(flag, dtype=bool).reshape(-1), strict=True):
+                self.filtered[i].append(bool(f))
+        return checked
+
+    def record(self, step: int, actions: np.ndarray, outcome: tuple,
+               active: np.ndarray) -> np.ndarray:
+        """Keep step ``step``'s samples; return which active episodes ended there.
+
+        ``outcome`` is ``(reward, terminated, truncated, info)`` of ``venv.step``.
+        """
+        reward, terminated, trunc, info = outcome
+        self.actions.append(actions.copy())
+        self.rewards.append(np.array(reward, dtype=float))
+        for key in RECORDED_KEYS + (_COMMAND,):
+            self.rows[key].append(np.array(info[key], dtype=float))
+        ended = active & (terminated | trunc)
+        for i in np.flatnonzero(ended).tolist():
+            self.end[i] = step
+            self.failure[i] = info["failure"][i]
+            self.truncated[i] = bool(trunc[i] and not terminated[i])
+        return ended
+
+    def trajectories(self, seeds: list, settings: dict,
+                     layout: ObservationLayout) -> list[Trajectory]:
+        """One Trajectory per episode, cut at its end."""
+        stacked = {key: np.stack(value) for key, value in self.rows.items()}
+        acts = np.stack(self.actions)
+        rews = np.stack(self.rewards)
+        out = []
+        for i, seed in enumerate(seeds):
+            k = int(self.end[i])
+            arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
+            command = layout.to_reel_rate(stacked[_COMMAND][1:k + 1, i])
+            flags = self.filtered[i]
+            out.append(Trajectory(**arrays, action=acts[:k, i], command=command,
+                                  reward=rews[:k, i], failure=self.failure[i],
+                                  truncated=bool(self.truncated[i]), seed=seed,
+                                  settings=dict(settings),
+                                  filter_active=(np.array(flags, dtype=bool)
+                                                 if len(flags) == k else None)))
+        return out
+
+
+def _groups(policies: list) -> list[list[int]]:
+    """Episodes that share one ``predict`` call per step.
+
+    A batch-invariant policy shared by several episodes gets their observations in one
+    call (row i of the batch is bitwise row i alone); every other policy one each.
+    """
     groups: dict[int, list[int]] = {}
     for i, policy in enumerate(policies):
         group = id(policy) if getattr(policy, "batch_invariant", False) else -1 - i
         groups.setdefault(group, []).append(i)
+    return list(groups.values())
+
+
+def _run(venv, policies: list, seeds: list, options: dict | None) -> list[Trajectory]:
+    base = venv.unwrapped
+    if base.num_envs != len(seeds):
+        raise ValueError(f"env has {base.num_envs} sub-envs for {len(seeds)} seeds")
+    n_act = int(base.single_action_space.shape[0])
+    num = len(seeds)
+    obs, info = venv.reset(seed=seeds, options=options)
+    book = _Book.start(info, num)
+    active = np.ones(num, dtype=bool)
+    actions = np.zeros((num, n_act), dtype=np.float32)
+    groups = _groups(policies)
+    step = 0
     while active.any():
-        for members in groups.values():
+        for members in groups:
             idx = [i for i in members if active[i]]
-            if not idx:
-                continue
-            policy = policies[idx[0]]
-            held = [states[i] for i in idx]
-            state = None if any(h is None for h in held) else np.stack(held)
-            action, new_state = policy.predict(obs[idx], state=state,
-                                               episode_start=~started[idx],
-                                               deterministic=True)
-            started[idx] = True
-            actions[idx] = _checked(action, policy, n_act, len(idx))
-            if new_state is not None:
-                for j, i in enumerate(idx):
-                    states[i] = np.asarray(new_state)[j]
-            flag = getattr(policy, "last_filter_active", None)
-            if flag is not None:
-                for i, f in zip(idx, np.asarray(flag, dtype=bool).reshape(-1), strict=True):
-                    filtered[i].append(bool(f))
+            if idx:
+                actions[idx] = book.act(policies[idx[0]], idx, obs, n_act)
         actions[~active] = 0.0
-        obs, reward, terminated, trunc, info = venv.step(actions)
+        obs, *outcome = venv.step(actions)
         step += 1
-        actions_log.append(actions.copy())
-        rewards_log.append(np.array(reward, dtype=float))
-        for key in RECORDED_KEYS + (_COMMAND,):
-            rows[key].append(np.array(info[key], dtype=float))
-        ended = active & (terminated | trunc)
-        for i in np.flatnonzero(ended).tolist():
-            end[i] = step
-            failure[i] = info["failure"][i]
-            truncated[i] = bool(trunc[i] and not terminated[i])
-        active &= ~ended
-    stacked = {key: np.stack(value) for key, value in rows.items()}
-    acts = np.stack(actions_log)
-    rews = np.stack(rewards_log)
-    settings = _settings(cfg)
-    out = []
-    for i in range(num):
-        k = int(end[i])
-        arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
-        action = acts[:k, i]
-        command = layout.to_reel_rate(stacked[_COMMAND][1:k + 1, i])
-        out.append(Trajectory(**arrays, action=action, command=command,
-                              reward=rews[:k, i], failure=failure[i],
-                              truncated=bool(truncated[i]), seed=seeds[i],
-                              settings=dict(settings),
-                              filter_active=(np.array(filtered[i], dtype=bool)
-                                             if len(filtered[i]) == k else None)))
-    return out
+        active &= ~book.record(step, actions, tuple(outcome), active)
+    return book.trajectories(seeds, _settings(base.config), ObservationLayout.from_env(base))

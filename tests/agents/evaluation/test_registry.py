@@ -241,3 +241,20 @@ def test_importing_the_package_loads_neither_torch_nor_sb3():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
     assert out.strip() == "[]"
+
+
+# --------------------------------------------------------------------------- #
+# the README's example runs as shown
+# --------------------------------------------------------------------------- #
+def test_readme_example_runs_as_shown(capsys):
+    import re
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[3] / "README.md").read_text()
+    section = readme[readme.index("## Evaluate your own controller"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme_example"})
+    printed = capsys.readouterr().out.strip().splitlines()
+    shown = [line[2:] for line in code.splitlines() if line.startswith("# ") and ":" in line
+             and line[2:].split(":")[0] in ("hold", "smc")]
+    assert printed == shown and len(shown) == 2
