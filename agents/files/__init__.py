@@ -1,6 +1,21 @@
-"""Agent files and run folders: the safe agent format, loading trained agents, export."""
+"""Agent files and run folders: the one owner of what trained agents and runs leave on disk.
 
-from .agent_files import seed_runs
+Modules by job:
+
+* :mod:`.safe_format`: the safe agent format (``agent.json`` + ``policy.safetensors``),
+  save and load; :mod:`.policy_json` turns a policy's spaces and settings into plain data.
+* :mod:`.run_folder`: the layout of ``train.py``'s run folders and folders of seed runs
+  (file names, readers, atomic writers).
+* :mod:`.pickled`: stable-baselines3's pickled run folders, loaded on explicit opt-in.
+* :mod:`.trained`: :class:`TrainedAgent`, a loaded agent with the common ``predict``;
+  :mod:`.mlp` its batch-invariant forward pass.
+* :mod:`.export`: copy the shareable files of runs, convert pickled runs.
+* :mod:`.cli`: ``python -m tether_gym_agents.files {convert,export}``.
+"""
+
+from .run_folder import seed_runs
+from .safe_format import AgentLoadError, ObsNormalization, load_agent, save_agent
 from .trained import TrainedAgent, hybrid_of, pretrained_agents
 
-__all__ = ["TrainedAgent", "hybrid_of", "pretrained_agents", "seed_runs"]
+__all__ = ["TrainedAgent", "hybrid_of", "pretrained_agents", "seed_runs", "AgentLoadError",
+           "ObsNormalization", "save_agent", "load_agent"]

@@ -1,6 +1,6 @@
 """Load a trained agent as a policy with the common ``predict``.
 
-An agent is a folder in the safe format of :mod:`tether_gym_agents.files.agent_files`
+An agent is a folder in the safe format of :mod:`tether_gym_agents.files.safe_format`
 (``agent.json`` + ``policy.safetensors``: tensors and plain data only, so loading never runs
 code). ``TrainedAgent.load`` accepts such a folder, a run folder written by
 ``train.py`` (its best agent sits at the top, the final one in ``final_agent/``,
@@ -19,19 +19,18 @@ from pathlib import Path
 import numpy as np
 
 from ..common.features import FeatureSpec, add_features
-from .agent_files import (
+from .mlp import NumpyMLP
+from .pickled import PICKLED_MODEL_FILES, load_pickled_run, run_features, run_hybrid
+from .run_folder import CONFIG_FILE, FINAL_AGENT_DIR, read_config, seed_runs
+from .safe_format import (
     AGENT_FILE,
-    PICKLED_MODEL_FILES,
     WEIGHTS_FILE,
     AgentLoadError,
+    ObsNormalization,
     is_unit,
     load_agent,
-    load_pickled_run,
-    run_features,
-    run_hybrid,
-    seed_runs,
+    normalization_of,
 )
-from .mlp import NumpyMLP
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
            "RUN_AGENT_DIRS", "find_unit", "hybrid_of"]
@@ -39,7 +38,7 @@ __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agent
 PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
 """Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
 
-RUN_AGENT_DIRS = ("final_agent",)
+RUN_AGENT_DIRS = (FINAL_AGENT_DIR,)
 """Safe agent folders inside a ``train.py`` run folder, in the order they are tried."""
 
 
@@ -71,12 +70,12 @@ def hybrid_of(path) -> dict | None:
         if unit is not None:
             meta = json.loads((unit / AGENT_FILE).read_text())
             return meta.get("hybrid") if isinstance(meta, dict) else None
-        cfg = (path if path.is_dir() else path.parent) / "config.yml"
-        if cfg.is_file():
+        run = path if path.is_dir() else path.parent
+        if (run / CONFIG_FILE).is_file():
             import yaml
 
             try:
-                data = yaml.safe_load(cfg.read_text()) or {}
+                data = read_config(run)
             except yaml.YAMLError:
                 return None
             return run_hybrid(data) if isinstance(data, dict) else None
@@ -95,6 +94,8 @@ class TrainedAgent:
     ----------
     model : stable_baselines3 BasePolicy
         The policy (``model.observation_space``, ``model.predict``).
+    norm : ObsNormalization or None
+        The observation statistics it was trained with (None: not normalised).
     algo : str
         ``"ppo"`` or ``"sac"``, as recorded in the agent's files.
     env_id, env_kwargs : str or None, dict
@@ -110,14 +111,12 @@ class TrainedAgent:
         normalised (:mod:`tether_gym_agents.common.features`); None: the observation alone.
     """
 
-    def __init__(self, model, obs_rms=None, clip_obs: float = 10.0, epsilon: float = 1e-8,
-                 name: str = "agent", algo: str | None = None, env_id: str | None = None,
+    def __init__(self, model, norm: ObsNormalization | None = None, name: str = "agent",
+                 algo: str | None = None, env_id: str | None = None,
                  env_kwargs: dict | None = None, path: Path | None = None,
                  hybrid: dict | None = None, features: dict | None = None):
         self.model = model
-        self.obs_rms = obs_rms
-        self.clip_obs = clip_obs
-        self.epsilon = epsilon
+        self.norm = norm
         self.name = name
         self.algo = algo
         self.env_id = env_id
@@ -175,15 +174,10 @@ class TrainedAgent:
         unit = find_unit(path)
         if unit is not None:
             policy, meta = load_agent(unit)
-            norm = meta["obs_normalization"]
-            obs_rms = None
-            if norm is not None:
-                obs_rms = _Stats(norm["mean"], norm["var"])
             label = (path.parent if path.is_file() else path).name
-            return cls(policy, obs_rms, float(norm["clip_obs"]) if norm else 10.0,
-                       float(norm["epsilon"]) if norm else 1e-8,
-                       name=f"{meta['algo']}:{label}", algo=meta["algo"],
-                       env_id=meta["env"].get("id"), env_kwargs=meta["env"].get("kwargs"),
+            return cls(policy, normalization_of(meta), name=f"{meta['algo']}:{label}",
+                       algo=meta["algo"], env_id=meta["env"].get("id"),
+                       env_kwargs=meta["env"].get("kwargs"),
                        path=unit, hybrid=meta["hybrid"], features=meta["features"])
         if path.is_file() and path.suffix not in (".zip", ".pkl"):
             raise AgentLoadError(f"{path} is not an agent file: give an agent folder "
@@ -191,20 +185,15 @@ class TrainedAgent:
         if path.is_dir() and not any((path / f).is_file() for f in PICKLED_MODEL_FILES):
             raise AgentLoadError(f"no agent in {path}: no {AGENT_FILE} (nor "
                                  f"{'/, '.join(RUN_AGENT_DIRS)}/ holding one)")
-        model, obs_rms, clip_obs, epsilon, info = load_pickled_run(
-            path, allow_pickle=allow_pickle, algo=algo)
-        cfg = info["config"]
-        return cls(model.policy, obs_rms, clip_obs, epsilon,
-                   name=f"{info['algo']}:{info['run_dir'].name}", algo=info["algo"],
-                   env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
-                   path=info["run_dir"], hybrid=run_hybrid(cfg), features=run_features(cfg))
+        run = load_pickled_run(path, allow_pickle=allow_pickle, algo=algo)
+        cfg = run.config
+        return cls(run.model.policy, run.norm, name=f"{run.algo}:{run.run_dir.name}",
+                   algo=run.algo, env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
+                   path=run.run_dir, hybrid=run_hybrid(cfg), features=run_features(cfg))
 
     def normalize(self, obs: np.ndarray) -> np.ndarray:
         """Observations as the policy saw them in training (VecNormalize's formula)."""
-        if self.obs_rms is None:
-            return obs
-        return np.clip((obs - self.obs_rms.mean) / np.sqrt(self.obs_rms.var + self.epsilon),
-                       -self.clip_obs, self.clip_obs).astype(np.float32)
+        return obs if self.norm is None else self.norm.apply(obs)
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         """stable-baselines3's ``predict`` for one observation or a batch: (action, state).
@@ -243,14 +232,6 @@ class TrainedAgent:
 
     def __repr__(self) -> str:
         return f"TrainedAgent({self.name})"
-
-
-class _Stats:
-    """Mean and variance of observations (the part of RunningMeanStd that acting needs)."""
-
-    def __init__(self, mean: np.ndarray, var: np.ndarray):
-        self.mean = np.asarray(mean, dtype=np.float64)
-        self.var = np.asarray(var, dtype=np.float64)
 
 
 def pretrained_agents() -> dict[str, Path]:

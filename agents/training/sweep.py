@@ -34,10 +34,13 @@ Sweep file (YAML, read with ``yaml.safe_load``; unknown keys are rejected)::
 
 The hyperparameters of a trial are the base config (``--config`` or the packaged
 ``configs/<algo>.yml``) with the trial's values set; they are written to
-``trial_NNN/hyperparams.yml`` and passed to each seed as ``--config``, so every
-seed folder is a single run that ``train.py --config trial_NNN/hyperparams.yml
---seed K --out trial_NNN/seed_K`` reproduces. ``--seeds N`` on the command line
-overrides ``seeds_per_trial``.
+``trial_NNN/hyperparams.yml``; the settings of a trial are resolved from that file
+once (:func:`~tether_gym_agents.training.settings.resolve_settings`), and each seed's
+record is derived from them (:meth:`~tether_gym_agents.training.settings.TrainSettings.for_seed`)
+and trained by :func:`tether_gym_agents.training.run.train` in a Ray task, so every seed
+folder is a single run that ``train.py --config trial_NNN/hyperparams.yml --seed K
+--out trial_NNN/seed_K`` reproduces (its ``command.txt``). ``--seeds N`` on the
+command line overrides ``seeds_per_trial``.
 
 ``search: optuna`` runs the trials as Ray Tune trials with Optuna's sampler
 (``pip install optuna``) and ASHA: every trial trains its seeds one after the other,
@@ -51,7 +54,6 @@ rerun of an Optuna sweep starts new trials.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import itertools
 import json
@@ -59,20 +61,19 @@ import math
 import statistics
 import sys
 import time
+from dataclasses import dataclass, replace
 from enum import Enum
 from pathlib import Path
 
-from .fanout import (
-    INTERRUPTED,
-    SeedJob,
-    config_path,
-    init_ray,
-    require_ray,
-    run_jobs,
-    seed_argv,
-    train_seed,
+from ..files.run_folder import (
+    FANOUT_LOG_FILE,
+    read_evaluations,
+    seed_dir,
+    write_text_atomic,
 )
-from .train import ConfigError, load_hyperparams, parse_env_kwargs
+from .config import ConfigError, load_hyperparams
+from .fanout import INTERRUPTED, SeedJob, init_ray, require_ray, run_jobs, train_seed
+from .settings import TrainOptions, TrainSettings, resolve_settings
 
 __all__ = ["Search", "SweepSpec", "load_sweep", "expand_trials", "apply_overrides",
            "final_eval_return", "rank_trials", "write_table", "run_sweep"]
@@ -92,6 +93,7 @@ class Search(Enum):
     OPTUNA = "optuna"
 
 
+@dataclass(frozen=True)
 class SweepSpec:
     """A validated sweep file.
 
@@ -108,11 +110,13 @@ class SweepSpec:
         ``chunks``, ``grace_period``, ``reduction_factor``.
     """
 
-    def __init__(self, search, seeds_per_trial, num_samples, sample_seed, timesteps, params,
-                 asha):
-        self.search, self.seeds_per_trial = search, seeds_per_trial
-        self.num_samples, self.sample_seed = num_samples, sample_seed
-        self.timesteps, self.params, self.asha = timesteps, params, asha
+    search: Search
+    seeds_per_trial: int
+    num_samples: int
+    sample_seed: int
+    timesteps: int | None
+    params: dict
+    asha: dict
 
 
 def _int(doc, key, default, low, path):
@@ -250,13 +254,10 @@ def final_eval_return(run_dir: Path) -> float:
     """Mean return of the last evaluation in ``run_dir/eval/evaluations.npz``; NaN if none."""
     import numpy as np
 
-    path = Path(run_dir) / "eval" / "evaluations.npz"
-    if not path.is_file():
+    data = read_evaluations(run_dir)
+    if data is None or data["results"].shape[0] == 0:
         return float("nan")
-    with np.load(path) as data:
-        if data["results"].shape[0] == 0:
-            return float("nan")
-        return float(np.mean(data["results"][-1]))
+    return float(np.mean(data["results"][-1]))
 
 
 def rank_trials(trials: list[dict]) -> list[dict]:
@@ -320,70 +321,84 @@ def _trial_config(base: dict, overrides: dict, trial_dir: Path, algo: str, env_i
                           f"({record.read_text().strip()}, now {wanted}): the sweep file "
                           f"changed; give a new --out")
     config = trial_dir / "hyperparams.yml"
-    config.write_text(yaml.safe_dump({"default": apply_overrides(base, overrides)},
-                                     sort_keys=False))
+    write_text_atomic(config, yaml.safe_dump({"default": apply_overrides(base, overrides)},
+                                             sort_keys=False))
     load_hyperparams(config, algo, env_id)  # unknown keys fail before any training
-    record.write_text(wanted)
+    write_text_atomic(record, wanted)
     return config
 
 
-def run_sweep(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
-    """``train.py --sweep FILE.yml``; returns the exit code."""
-    spec = load_sweep(args.sweep)
-    if args.seeds is not None:
-        if args.seeds < 2:
-            raise ConfigError(f"--seeds {args.seeds} with --sweep: seeds per trial must be >= 2")
-        spec.seeds_per_trial = args.seeds
-    typed = set(parse_env_kwargs(args.env_kwargs))
+def _trial_settings(options: TrainOptions, base: dict, overrides: dict, trial_dir: Path,
+                    target: int) -> TrainSettings:
+    """The settings of a trial (its seeds follow with ``for_seed``), resolved once.
+
+    The trial's hyperparameter file is written first; the settings are those of
+    ``train.py --config trial_dir/hyperparams.yml --timesteps target``.
+    """
+    config = _trial_config(base, overrides, trial_dir, options.algo, options.env_id)
+    return resolve_settings(replace(options, config=str(config), out=str(trial_dir),
+                                    timesteps=target, seeds=None, sweep=None,
+                                    ray_address=None))
+
+
+def run_sweep(options: TrainOptions) -> int:
+    """``train.py --sweep FILE.yml``; returns the exit code.
+
+    Raises
+    ------
+    ConfigError
+        Before any training: a bad sweep file, a clash with ``--env-kwargs``, or a
+        trial whose settings :func:`~.settings.resolve_settings` rejects.
+    """
+    if options.sweep is None:
+        raise ConfigError("run_sweep needs --sweep FILE.yml")
+    spec = load_sweep(options.sweep)
+    if options.seeds is not None:
+        if options.seeds < 2:
+            raise ConfigError(f"--seeds {options.seeds} with --sweep: seeds per trial must be "
+                              ">= 2")
+        spec = replace(spec, seeds_per_trial=options.seeds)
+    typed = set(options.user_env_kwargs)
     clash = sorted(k for k in spec.params if k.startswith("env_kwargs.")
                    and k.split(".", 2)[1] in typed)
     if clash:
         raise ConfigError(f"--env-kwargs sets {clash}, which the sweep searches: remove them "
                           "from one of the two")
-    out = Path(args.out or Path("runs") / f"{args.algo}_sweep").absolute()
+    out = Path(options.out or Path("runs") / f"{options.algo}_sweep").absolute()
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is a file; --sweep needs a folder")
-    base = load_hyperparams(config_path(args), args.algo, args.env_id)
-    target = spec.timesteps or args.timesteps or int(base.get("n_timesteps", 1e5))
-    seeds = range(args.seed, args.seed + spec.seeds_per_trial)
+    base = load_hyperparams(options.config_path, options.algo, options.env_id)
+    target = spec.timesteps or options.timesteps or int(base.get("n_timesteps", 1e5))
+    seeds = range(options.seed, options.seed + spec.seeds_per_trial)
     out.mkdir(parents=True, exist_ok=True)
-    (out / "sweep.yml").write_text(Path(args.sweep).read_text())
+    (out / "sweep.yml").write_text(Path(options.sweep).read_text())
     if spec.search is Search.OPTUNA:
-        return _run_optuna(args, parser, spec, base, target, seeds, out)
-
+        return _run_optuna(options, spec, base, target, seeds, out)
     trials = expand_trials(spec)
-    configs = [_trial_config(base, t, out / f"trial_{i:03d}", args.algo, args.env_id)
-               for i, t in enumerate(trials)]
+    settings = [_trial_settings(options, base, t, out / f"trial_{i:03d}", target)
+                for i, t in enumerate(trials)]
     print(f"sweep: {len(trials)} trial(s) x {len(seeds)} seeds = {len(trials) * len(seeds)} runs "
           f"of {target} steps ({spec.search.value} search) in {out}", flush=True)
-    jobs = [SeedJob(f"trial {i} seed {s}", out / f"trial_{i:03d}" / f"seed_{s}",
-                    tuple(_seed_args(parser, args, config, s, out / f"trial_{i:03d}", target)),
-                    target)
-            for i, config in enumerate(configs) for s in seeds]
+    jobs = [SeedJob(f"trial {i} seed {s}", trial.for_seed(s, seed_dir(trial.out, s)))
+            for i, trial in enumerate(settings) for s in seeds]
     try:
-        results = run_jobs(jobs, address=args.ray_address, threads=args.torch_threads,
-                           summary_log=out / "fanout.log")
+        results = run_jobs(jobs, address=options.ray_address, threads=options.torch_threads,
+                           summary_log=out / FANOUT_LOG_FILE)
     except KeyboardInterrupt:
         print(INTERRUPTED, file=sys.stderr)
         return 130
     ranked = rank_trials([
-        {"name": f"trial_{i:03d}", "params": t,
-         "returns": [final_eval_return(out / f"trial_{i:03d}" / f"seed_{s}") for s in seeds]}
-        for i, t in enumerate(trials)])
+        {"name": trial.out.name, "params": t,
+         "returns": [final_eval_return(seed_dir(trial.out, s)) for s in seeds]}
+        for trial, t in zip(settings, trials, strict=True)])
     print(write_table(ranked, out, list(spec.params)))
-    failed = [r for r in results if r["status"] == "failed"]
+    failed = [r for r in results if r.status == "failed"]
     if failed:
         print(f"{len(failed)} run(s) failed; rerun the same command to resume them")
     return 1 if failed else 0
 
 
-def _seed_args(parser, args, config: Path, seed: int, trial_dir: Path, target: int) -> list[str]:
-    return seed_argv(parser, args, config=config, seed=seed, out=trial_dir / f"seed_{seed}",
-                     timesteps=target, seeds=None, sweep=None, ray_address=None,
-                     no_progress=True, verbose=max(args.verbose, 1))
-
-
-def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
+def _run_optuna(options, spec, base, target, seeds, out) -> int:
     """Optuna's sampler and ASHA through Ray Tune; one Tune trial per configuration."""
     try:
         import optuna  # noqa: F401
@@ -417,23 +432,23 @@ def _run_optuna(args, parser, spec, base, target, seeds, out) -> int:
     def trial_fn(config):
         overrides = overrides_of(config)
         trial_dir = out / f"trial_{tune.get_context().get_trial_id()}"
-        cfg = _trial_config(base, overrides, trial_dir, args.algo, args.env_id)
+        trial = _trial_settings(options, base, overrides, trial_dir, target)
         for chunk in range(1, chunks + 1):
             steps = max(target * chunk // chunks, 1)
             returns = []
             for s in seeds:
-                argv = _seed_args(parser, args, cfg, s, trial_dir, steps)
-                res = train_seed(SeedJob(f"{trial_dir.name} seed {s}", trial_dir / f"seed_{s}",
-                                         tuple(argv), steps), args.torch_threads)
-                returns.append(final_eval_return(trial_dir / f"seed_{s}")
-                               if res["status"] != "failed" else float("nan"))
+                job = SeedJob(f"{trial_dir.name} seed {s}",
+                              trial.for_seed(s, seed_dir(trial_dir, s), timesteps=steps))
+                res = train_seed(job, options.torch_threads)
+                returns.append(final_eval_return(job.run_dir)
+                               if res.status != "failed" else float("nan"))
             median = statistics.median(returns)
             tune.report({"median_return": -1e30 if math.isnan(median) else median,
                          "returns": returns, "steps": steps})
 
-    started = init_ray(args.ray_address)
+    started = init_ray(options.ray_address)
     try:
-        trainable = tune.with_resources(trial_fn, {"cpu": args.torch_threads})
+        trainable = tune.with_resources(trial_fn, {"cpu": options.torch_threads})
         tuner = tune.Tuner(
             trainable, param_space=space,
             tune_config=tune.TuneConfig(

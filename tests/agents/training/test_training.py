@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.evaluation.benchmark import main as evaluate_main
+from tether_gym_agents.cli.evaluate import main as evaluate_main
 from tether_gym_agents.files.trained import TrainedAgent
 from tether_gym_agents.training.train import ConfigError, load_hyperparams, main, parse_env_kwargs
 
@@ -162,7 +162,7 @@ def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
 def test_seed_learning_curves(tmp_path):
     """One plot of every seed's evaluation curve; needs two runs with evaluations."""
     pytest.importorskip("matplotlib")
-    from tether_gym_agents.training.train import plot_seed_learning_curves
+    from tether_gym_agents.training.curves import plot_seed_learning_curves
 
     steps = np.array([100, 200, 300])
     for k in range(3):

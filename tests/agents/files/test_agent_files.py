@@ -15,17 +15,16 @@ import torch
 import yaml
 
 import tether_gym
-from tether_gym_agents.evaluation.benchmark import main as evaluate_main
-from tether_gym_agents.files.agent_files import (
+from tether_gym_agents.cli.evaluate import main as evaluate_main
+from tether_gym_agents.files.cli import main as agent_files_main
+from tether_gym_agents.files.safe_format import (
     AGENT_FILE,
     WEIGHTS_FILE,
     AgentLoadError,
+    ObsNormalization,
     save_agent,
 )
-from tether_gym_agents.files.agent_files import main as agent_files_main
 from tether_gym_agents.files.trained import TrainedAgent
-
-DATA = os.path.join(os.path.dirname(__file__), "data")
 
 
 class _Evil:
@@ -98,9 +97,9 @@ def test_crafted_pickles_are_refused_and_never_run(tmp_path, evil):
 
 def _roundtrip(tmp_path, algo, obs_rms):
     model = _sb3_model(algo)
-    save_agent(tmp_path / algo, model.policy, algo, obs_rms=obs_rms, clip_obs=5.0,
-               epsilon=1e-8, env_id=tether_gym.ENV_ID, env_kwargs={"masses": (1.0, 2.0)},
-               training={"seed": 0, "num_timesteps": 0})
+    norm = ObsNormalization.of_stats(obs_rms, 5.0, 1e-8) if obs_rms is not None else None
+    save_agent(tmp_path / algo, model.policy, algo, norm, env_id=tether_gym.ENV_ID,
+               env_kwargs={"masses": (1.0, 2.0)}, training={"seed": 0, "num_timesteps": 0})
     return model, TrainedAgent.load(tmp_path / algo)
 
 
@@ -194,7 +193,6 @@ def test_convert_pickled_run(tmp_path):
     assert np.array_equal(safe.predict(obs)[0], legacy.predict(obs)[0])
 
 
-
 def test_export_copies_only_the_safe_files(tmp_path):
     """``export`` ships agents without pickles, checkpoints or logs."""
     src = tmp_path / "runs"
@@ -216,3 +214,17 @@ def test_export_copies_only_the_safe_files(tmp_path):
     assert TrainedAgent.load(tmp_path / "ship" / "seed_1").algo == "ppo"
     (src / "seed_1" / AGENT_FILE).unlink()
     assert agent_files_main(["export", str(src), str(tmp_path / "again")]) == 2
+
+
+def test_old_module_and_command_still_work(tmp_path):
+    """``python -m tether_gym_agents.files.agent_files`` and its imports are kept."""
+    import subprocess
+    import sys
+
+    from tether_gym_agents.files import agent_files
+
+    assert agent_files.AgentLoadError is AgentLoadError and agent_files.main is agent_files_main
+    for module in ("tether_gym_agents.files", "tether_gym_agents.files.agent_files"):
+        proc = subprocess.run([sys.executable, "-m", module, "export", "--help"],
+                              capture_output=True, text=True, timeout=120)
+        assert proc.returncode == 0 and "seed_K" in proc.stdout, proc.stderr

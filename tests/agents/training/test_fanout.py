@@ -1,4 +1,8 @@
-"""train.py --seeds: one single-run folder per seed as Ray tasks; skip finished, resume."""
+"""train.py --seeds: one single-run folder per seed as Ray tasks; skip finished, resume.
+
+The seeds are trained from records (TrainSettings.for_seed) by the training function:
+tests that need no real training replace ``fanout.train`` and run the jobs in-process.
+"""
 
 from __future__ import annotations
 
@@ -7,14 +11,18 @@ import json
 import shutil
 import sys
 import zipfile
-from pathlib import Path
+from dataclasses import FrozenInstanceError
 
 import numpy as np
 import pytest
 import yaml
 
-from tether_gym_agents.training.fanout import RAY_PIP, RunState, run_state, seed_argv
-from tether_gym_agents.training.train import _build_parser, main
+from tether_gym_agents.files.run_folder import write_train_info
+from tether_gym_agents.training import fanout
+from tether_gym_agents.training.config import ConfigError
+from tether_gym_agents.training.fanout import RAY_PIP, RunState, run_state
+from tether_gym_agents.training.settings import TrainSettings
+from tether_gym_agents.training.train import main
 
 # 2 envs x n_steps 128 (the tiny config): one PPO update per 256 steps, three in TARGET
 TINY = ["--n-envs", "2", "--eval-freq", "128", "--checkpoint-freq", "256", "--eval-episodes",
@@ -130,19 +138,6 @@ def test_resume_after_interrupt(fanned, tmp_path, tiny):
     np.testing.assert_array_equal(steps, np.arange(128, TARGET + 1, 128))
 
 
-def test_seed_argv_round_trip():
-    parser = _build_parser()
-    args = parser.parse_args(["--algo", "sac", "--seeds", "3", "--seed", "2", "--env-kwargs",
-                              "eccentricity=0.1", "masses=(1, 2, 3)", "--no-progress",
-                              "--config", "rel.yml", "--timesteps", "64"])
-    argv = seed_argv(parser, args, seed=4, seeds=None, out="runs/x/seed_4")
-    again = vars(parser.parse_args(argv))
-    expected = {**vars(args), "seed": 4, "seeds": None, "out": again["out"]}
-    expected["config"] = str(Path(args.config).absolute())
-    assert again == expected
-    assert "--seeds" not in argv and str(again["out"]) == "runs/x/seed_4"
-
-
 def test_run_state(tmp_path):
     run = tmp_path / "run"
     assert run_state(run, 100) == (RunState.NEW, 0)
@@ -160,17 +155,24 @@ def test_run_state(tmp_path):
 
 
 @pytest.mark.parametrize(("argv", "message"), [
-    (["--seeds", "0"], "--seeds must be >= 1, got 0"),
+    (["--seeds", "0"], "--seeds 0: must be an integer >= 1"),
     (["--seeds", "2", "--resume"], "--resume cannot be combined with --seeds"),
     (["--ray-address", "auto"], "needs --seeds N or --sweep"),
-    (["--seeds", "2", "--torch-threads", "0"], "--torch-threads must be >= 1, got 0"),
+    (["--seeds", "2", "--torch-threads", "0"], "--torch-threads 0: must be an integer >= 1"),
     (["--seeds", "2", "--env-kwargs", "eccentricity"], "must look like key=value"),
-    (["--seeds", "2", "--timesteps", "0"], "--timesteps must be >= 1, got 0"),
+    (["--seeds", "2", "--timesteps", "0"], "--timesteps 0: must be an integer >= 1"),
+    (["--seeds", "1", "--env-kwargs", "eccentricity=1.5"], "--env-kwargs eccentricity=1.5"),
 ])
-def test_bad_flags_fail_before_work(tmp_path, capsys, argv, message):
+def test_bad_flags_fail_before_work(tmp_path, capsys, argv, message, monkeypatch):
+    monkeypatch.setattr(fanout, "train", _no_training)
     assert main([*argv, "--out", str(tmp_path / "o")]) == 2
-    assert message in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err and err.startswith("train.py: error: ")
     assert not (tmp_path / "o").exists()
+
+
+def _no_training(settings):
+    raise AssertionError(f"trained {settings.out}")
 
 
 def test_without_ray(tmp_path, capsys, monkeypatch, tiny):
@@ -188,17 +190,91 @@ def test_without_ray(tmp_path, capsys, monkeypatch, tiny):
     assert _info(tmp_path / "fan" / "seed_3")["seed"] == 3
 
 
-def test_failed_seed_is_reported(tmp_path, capsys, monkeypatch, tiny):
-    monkeypatch.setitem(sys.modules, "ray", None)
-    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+def _in_process(monkeypatch, fake_train):
+    """Seeds run in this process with ``fake_train`` as the training function."""
+    monkeypatch.setattr(fanout, "train", fake_train)
+    monkeypatch.setattr(fanout, "require_ray", lambda: None)
+    real = fanout.run_jobs
+    monkeypatch.setattr(fanout, "run_jobs", lambda jobs, **kw: real(jobs, **{**kw,
+                                                                           "use_ray": False}))
+    resolved = []
+    real_resolve = fanout.resolve_settings
+
+    def resolve(*args, **kwargs):
+        resolved.append(args[0])
+        return real_resolve(*args, **kwargs)
+
+    monkeypatch.setattr(fanout, "resolve_settings", resolve)
+    return resolved
+
+
+def test_seeds_are_trained_from_records_and_failures_carry_their_message(tmp_path, capsys,
+                                                                         monkeypatch):
+    """Every seed gets a TrainSettings derived from one resolution; a seed's exception is
+    reported with its message and the other seeds go on."""
+    calls = []
+
+    def fake_train(settings):
+        calls.append(settings)
+        if settings.seed == 4:
+            raise ConfigError("seed 4 cannot train: boom")
+        if settings.seed == 5:
+            raise RuntimeError("worker lost")
+        write_train_info(settings.out, {"num_timesteps": settings.timesteps, "wall_time_s": 1.5})
+
+    resolved = _in_process(monkeypatch, fake_train)
     out = tmp_path / "fan"
-    assert main(["--seeds", "1", "--out", str(out), "--timesteps", "256", *tiny,
-                 "--env-kwargs", "eccentricity=1.5"]) == 1
+    assert main(["--seeds", "3", "--seed", "3", "--out", str(out), "--timesteps", "64",
+                 "--env-kwargs", "orbits_per_episode=0.05", "--verbose", "0"]) == 1
+    assert len(resolved) == 1  # the settings were resolved once, for every seed
+    assert [s.seed for s in calls] == [3, 4, 5]
+    for settings in calls:
+        assert isinstance(settings, TrainSettings)
+        with pytest.raises(FrozenInstanceError):
+            settings.n_envs = 3  # type: ignore[misc]
+        assert settings.out == out.absolute() / f"seed_{settings.seed}"
+        assert settings.timesteps == 64 and settings.env_kwargs == calls[0].env_kwargs
+        assert settings.options.seeds is None and settings.options.no_progress
+        assert settings.options.verbose == 1  # the task's log shows SB3's tables
+        assert settings.command == ("--env-kwargs", "orbits_per_episode=0.05", "--timesteps",
+                                    "64", "--seed", str(settings.seed), "--out",
+                                    str(settings.out), "--no-progress", "--verbose", "1")
     printed = capsys.readouterr().out
-    assert "seed 0: FAILED" in printed and "eccentricity" in printed
-    log = (out / "seed_0" / "train.log").read_text()
-    assert "train.py: error:" in log and "eccentricity=1.5" in log and "Traceback" not in log
-    assert "FAILED" in (out / "fanout.log").read_text()
+    assert "seed 3: trained in" in printed
+    assert "seed 4: FAILED after" in printed and ": seed 4 cannot train: boom (log" in printed
+    assert "seed 5: FAILED after" in printed and "RuntimeError: worker lost" in printed
+    log4 = (out / "seed_4" / "train.log").read_text()
+    assert "train.py: error: seed 4 cannot train: boom" in log4 and "Traceback" not in log4
+    assert "Traceback" in (out / "seed_5" / "train.log").read_text()
+    assert (out / "fanout.log").read_text().count("FAILED") == 2
+    # the same command again: seed 3 is skipped, the failed ones are trained again
+    calls.clear()
+    assert main(["--seeds", "3", "--seed", "3", "--out", str(out), "--timesteps", "64",
+                 "--env-kwargs", "orbits_per_episode=0.05"]) == 1
+    assert [s.seed for s in calls] == [4, 5]
+
+
+def test_partial_seed_is_resumed_as_train_py_resume(tmp_path, monkeypatch):
+    """A seed with a checkpoint is continued from the run folder's config.yml."""
+    calls = []
+
+    def fake_train(settings):
+        calls.append(settings)
+        write_train_info(settings.out, {"num_timesteps": 64, "wall_time_s": 1.0})
+
+    resolved = _in_process(monkeypatch, fake_train)
+    run = tmp_path / "fan" / "seed_0"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "model_48_steps.zip").write_bytes(b"")
+    (run / "config.yml").write_text(yaml.safe_dump({"algo": "ppo", "hyperparams": {
+        "n_steps": 16, "normalize": False, "n_envs": 2, "eval_freq": 32,
+        "checkpoint_freq": 16, "env_kwargs": {"orbits_per_episode": 0.05}}}))
+    assert main(["--seeds", "1", "--out", str(tmp_path / "fan"), "--timesteps", "64"]) == 0
+    (settings,) = calls
+    assert settings.resume and settings.timesteps == 16 and settings.n_envs == 2
+    assert settings.source == str(run.absolute() / "config.yml")
+    assert settings.command[-3:] == ("--resume", "--timesteps", "16")
+    assert len(resolved) == 2  # the fan-out's settings, then the resumed run's
 
 
 def test_resume_after_evaluation_past_the_checkpoint(tmp_path, monkeypatch, tiny):

@@ -172,3 +172,48 @@ def test_optuna_asha_sweep(ray_session, tmp_path, capsys):
         assert (trial / "seed_0" / "train_info.json").is_file()
         returns = [final_eval_return(trial / f"seed_{s}") for s in (0, 1)]
         assert float(row["median return"]) == pytest.approx(statistics.median(returns), rel=1e-3)
+
+
+def test_trials_are_trained_from_records(tmp_path, capsys, monkeypatch):
+    """Each trial's settings are resolved once from its hyperparams.yml; its seeds are
+    records derived from them, given to the training function (here a fake)."""
+    from tether_gym_agents.files.run_folder import write_evaluations, write_train_info
+    from tether_gym_agents.training import fanout, sweep
+    from tether_gym_agents.training.settings import TrainSettings
+
+    calls = []
+
+    def fake_train(settings):
+        calls.append(settings)
+        score = settings.hyperparams["learning_rate"] * 1000 + settings.seed
+        write_evaluations(settings.out, {"timesteps": np.array([settings.timesteps]),
+                                         "results": np.array([[score]]),
+                                         "ep_lengths": np.ones((1, 1))})
+        write_train_info(settings.out, {"num_timesteps": settings.timesteps, "wall_time_s": 0.1})
+
+    monkeypatch.setattr(fanout, "train", fake_train)
+    real_jobs, real_resolve, resolved = sweep.run_jobs, sweep.resolve_settings, []
+    monkeypatch.setattr(sweep, "run_jobs", lambda jobs, **kw: real_jobs(jobs, **{
+        **kw, "use_ray": False}))
+    monkeypatch.setattr(sweep, "resolve_settings",
+                        lambda options: resolved.append(options) or real_resolve(options))
+    path = _sweep_file(tmp_path, {"seeds_per_trial": 2, "timesteps": 64,
+                                  "params": {"learning_rate": [1.0e-3, 2.0e-3]}})
+    out = tmp_path / "sw"
+    assert main(["--sweep", str(path), "--out", str(out), "--env-kwargs",
+                 "orbits_per_episode=0.05"]) == 0
+    assert len(resolved) == 2  # once per trial
+    assert [(s.hyperparams["learning_rate"], s.seed) for s in calls] == [
+        (1.0e-3, 0), (1.0e-3, 1), (2.0e-3, 0), (2.0e-3, 1)]
+    for settings in calls:
+        trial = out / f"trial_00{int(settings.hyperparams['learning_rate'] * 1000) - 1}"
+        assert isinstance(settings, TrainSettings)
+        assert settings.out == trial / f"seed_{settings.seed}" and settings.timesteps == 64
+        assert settings.options.config == str(trial / "hyperparams.yml")
+        assert settings.env_kwargs["orbits_per_episode"] == 0.05
+        config_at = settings.command.index("--config") + 1
+        assert settings.command[config_at] == str(trial / "hyperparams.yml")
+    with open(out / "sweep_results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [(r["trial"], r["median return"]) for r in rows] == [("trial_001", "2.5"),
+                                                                ("trial_000", "1.5")]

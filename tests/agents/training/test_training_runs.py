@@ -12,8 +12,9 @@ import yaml
 from stable_baselines3.common.callbacks import EvalCallback
 
 from tether_gym_agents.files.trained import TrainedAgent
-from tether_gym_agents.training import train as training
-from tether_gym_agents.training.train import ConfigError, main, resolve_env_kwargs
+from tether_gym_agents.training import callbacks
+from tether_gym_agents.training.config import ConfigError, resolve_env_kwargs, with_schedules
+from tether_gym_agents.training.train import main
 
 FAST = ["--n-envs", "2", "--no-progress", "--eval-episodes", "1"]
 SHORT = ["--env-kwargs", "orbits_per_episode=0.05"]
@@ -97,7 +98,7 @@ def test_nonuniform_config_list_error_names_the_line(tmp_path, capsys):
 
 def test_linear_schedules_in_zoo_notation(tmp_path, capsys):
     """``learning_rate: lin_3e-4`` falls from 3e-4 to 0 over the run; bad ones stop it."""
-    schedule = training.with_schedules({"learning_rate": "lin_3e-4", "gamma": 0.9})
+    schedule = with_schedules({"learning_rate": "lin_3e-4", "gamma": 0.9})
     assert schedule["gamma"] == 0.9
     assert [schedule["learning_rate"](p) for p in (1.0, 0.5, 0.0)] == [3e-4, 1.5e-4, 0.0]
     cfg = tmp_path / "c.yml"
@@ -189,7 +190,7 @@ def _tb_scalars(tb_dir):
 def test_resume_after_kill_has_no_doubled_steps_and_keeps_wall_time(tmp_path, monkeypatch):
     out = tmp_path / "run"
     argv = ["--out", str(out), *FAST, *SHORT, "--eval-freq", "256", "--checkpoint-freq", "512"]
-    monkeypatch.setattr(training, "PROGRESS_EVERY_S", 0.0)
+    monkeypatch.setattr(callbacks, "PROGRESS_EVERY_S", 0.0)
     with monkeypatch.context() as m:
         # evaluations at 256, 512 (checkpoint), 768: killed after the last one
         _kill_after_eval_at(m, 768, sleep_at=512, sleep_s=2.0)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.evaluation.benchmark import make_policy, resolve_policy
-from tether_gym_agents.files.agent_files import AGENT_FILE, load_agent
+from tether_gym_agents.evaluation.registry import make_policy, resolve_policy
+from tether_gym_agents.files.safe_format import AGENT_FILE, load_agent
 from tether_gym_agents.files.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
 
 SHIPPED = {"ppo": "rl", "ppo_symlog": "rl", "smc_residual": "hybrid"}

@@ -1,0 +1,86 @@
+"""Share trained runs: copy their safe files, or convert a pickled run to a safe agent."""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from .pickled import load_pickled_run, run_features, run_hybrid
+from .run_folder import (
+    ARGS_FILE,
+    BEST_MODEL_FILE,
+    COMMAND_FILE,
+    CONFIG_FILE,
+    EVALUATIONS_FILE,
+    FANOUT_LOG_FILE,
+    FINAL_AGENT_DIR,
+    LEARNING_CURVE_FILE,
+    SEED_CURVES_FILE,
+    TRAIN_INFO_FILE,
+    read_train_info,
+    seed_runs,
+)
+from .safe_format import AGENT_FILE, WEIGHTS_FILE, AgentLoadError, is_unit, save_agent
+
+__all__ = ["EXPORTED_FILES", "EXPORTED_FOLDER_FILES", "export_runs", "convert_run"]
+
+EXPORTED_FILES = (AGENT_FILE, WEIGHTS_FILE, CONFIG_FILE, ARGS_FILE, COMMAND_FILE,
+                  TRAIN_INFO_FILE, LEARNING_CURVE_FILE, EVALUATIONS_FILE)
+"""What :func:`export_runs` copies of a run folder: the safe agent, how it was trained
+and its learning curve (no pickles, checkpoints, TensorBoard files or logs)."""
+EXPORTED_FOLDER_FILES = (SEED_CURVES_FILE, FANOUT_LOG_FILE)
+"""What it copies of a folder of seed runs besides the runs."""
+
+
+def export_runs(src, dest) -> list[Path]:
+    """Copy the shareable files of a run folder, or of every ``seed_K`` run in a folder.
+
+    Only :data:`EXPORTED_FILES` (and the folder's :data:`EXPORTED_FOLDER_FILES`) are
+    copied; every run must hold a safe agent (``agent.json`` + ``policy.safetensors``).
+    Returns the run folders written. Raises AgentLoadError naming a run without one.
+    """
+    src, dest = Path(src), Path(dest)
+    runs = seed_runs(src)
+    pairs = [(run, dest / run.name) for run in runs] if runs else [(src, dest)]
+    for run, _ in pairs:
+        if not is_unit(run):
+            raise AgentLoadError(f"{run} holds no safe agent ({AGENT_FILE} + {WEIGHTS_FILE}); "
+                                 "convert it first")
+    for run, out in pairs:
+        for name in EXPORTED_FILES:
+            if (run / name).is_file():
+                (out / name).parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy2(run / name, out / name)
+    if runs:
+        for name in EXPORTED_FOLDER_FILES:
+            if (src / name).is_file():
+                shutil.copy2(src / name, dest / name)
+    return [out for _, out in pairs]
+
+
+def convert_run(path, out=None, allow_pickle: bool = False) -> Path:
+    """Convert a stable-baselines3 run folder (pickles) to a safe agent folder.
+
+    Parameters
+    ----------
+    path : path-like
+        Run folder or model ``.zip`` inside one.
+    out : path-like or None
+        Agent folder to write (default: the run folder itself for ``best_model.zip``,
+        as ``train.py`` writes it, else ``<run folder>/final_agent``).
+    allow_pickle : bool
+        Must be True: the conversion unpickles the files once.
+    """
+    run = load_pickled_run(path, allow_pickle=allow_pickle)
+    cfg = run.config
+    if out is None:
+        out = (run.run_dir if run.model_path.name == BEST_MODEL_FILE
+               else run.run_dir / FINAL_AGENT_DIR)
+    train_info = read_train_info(run.run_dir)
+    training = {"seed": cfg.get("seed", train_info.get("seed")),
+                "num_timesteps": int(run.model.num_timesteps),
+                "source": run.model_path.name,
+                "command": train_info.get("command")}
+    return save_agent(Path(out), run.model.policy, run.algo, run.norm,
+                      env_id=cfg.get("env_id"), env_kwargs=cfg.get("env_kwargs"),
+                      training=training, hybrid=run_hybrid(cfg), features=run_features(cfg))

@@ -1,0 +1,175 @@
+"""stable-baselines3's pickled run folders (``*.zip`` + ``vecnormalize.pkl``): opt-in only.
+
+Both files can run arbitrary code when they are loaded (cloudpickled entries in the
+zip's ``data``, a plain pickle); they are read only by :func:`load_pickled_run`, behind
+an explicit ``allow_pickle=True``, and :func:`~tether_gym_agents.files.export.convert_run`
+turns such a run folder into a safe agent folder once.
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..common.features import FeatureSpec
+from ..hybrids.residual_spec import ResidualSpec
+from .run_folder import (
+    BEST_MODEL_FILE,
+    CONFIG_FILE,
+    FINAL_MODEL_FILE,
+    VECNORMALIZE_FILE,
+    read_config,
+)
+from .safe_format import AGENT_FILE, ALGOS, AgentLoadError, ObsNormalization, recorded_spec
+
+__all__ = ["PICKLED_MODEL_FILES", "PICKLE_WARNING", "PickledRun", "load_pickled_run",
+           "run_hybrid", "run_features"]
+
+PICKLED_MODEL_FILES = (BEST_MODEL_FILE, FINAL_MODEL_FILE, "model.zip")
+"""stable-baselines3 model files that a run folder may hold (pickled: opt-in only)."""
+PICKLE_WARNING = ("loading pickled agent files ({files}): a pickle can run any code when "
+                  "it is loaded; do this only for files you made yourself or trust")
+
+
+@dataclass(frozen=True)
+class PickledRun:
+    """A model loaded from a run folder's pickled files.
+
+    Attributes
+    ----------
+    model : stable_baselines3 PPO or SAC
+    norm : ObsNormalization or None
+        Its observation statistics (None: observations were not normalised).
+    algo : str
+    run_dir, model_path : Path
+    config : dict
+        The run's ``config.yml``.
+    """
+
+    model: Any
+    norm: ObsNormalization | None
+    algo: str
+    run_dir: Path
+    model_path: Path
+    config: dict
+
+
+def _refuse(files) -> AgentLoadError:
+    return AgentLoadError(
+        f"refusing pickled agent files {[str(f) for f in files]}: loading them can run code "
+        "from the file. Convert a run folder you trust once with `python -m "
+        "tether_gym_agents.files convert RUN_DIR --allow-pickle`, or load it with "
+        "allow_pickle=True (evaluate.py --allow-pickle)")
+
+
+def _model_file(path: Path) -> tuple[Path, Path]:
+    """(run folder, model file) that ``path`` designates."""
+    if path.is_dir():
+        found = [path / f for f in PICKLED_MODEL_FILES if (path / f).is_file()]
+        if not found:
+            raise AgentLoadError(f"no agent in {path}: neither {AGENT_FILE} nor a model file "
+                                 f"({', '.join(PICKLED_MODEL_FILES)})")
+        return path, found[0]
+    if path.is_file():
+        return path.parent, path
+    raise AgentLoadError(f"agent path {str(path)!r} does not exist")
+
+
+def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) -> PickledRun:
+    """Load a stable-baselines3 run folder (``*.zip`` + ``vecnormalize.pkl``): opt-in only.
+
+    The folder must be a complete unit: a model file, ``config.yml`` recording the
+    algorithm and whether observations were normalised, and ``vecnormalize.pkl`` when
+    they were. A lone ``.zip`` needs its run folder around it.
+
+    Raises
+    ------
+    AgentLoadError
+        Without ``allow_pickle=True`` (the message says how to convert), or when a
+        piece is missing (named).
+    """
+    import zipfile
+
+    run_dir, model_path = _model_file(Path(path))
+    stats = run_dir / VECNORMALIZE_FILE
+    if not allow_pickle:
+        raise _refuse([model_path] + ([stats] if stats.is_file() else []))
+    cfg = _run_config(run_dir, model_path)
+    algo = (algo or cfg.get("algo") or "").lower()
+    if algo not in ALGOS:
+        raise AgentLoadError(f"{run_dir / CONFIG_FILE} does not record the algorithm ('algo: "
+                             f"ppo|sac'), got {cfg.get('algo')!r}")
+    normalize = (cfg.get("hyperparams") or {}).get("normalize", None)
+    if normalize is None:
+        raise AgentLoadError(f"{run_dir / CONFIG_FILE} does not record hyperparams.normalize: "
+                             "cannot tell whether observations must be normalised")
+    warnings.warn(PICKLE_WARNING.format(files=[str(model_path)]), stacklevel=2)
+    from stable_baselines3 import PPO, SAC
+
+    cls: Any = {"ppo": PPO, "sac": SAC}[algo]
+    try:
+        model = cls.load(model_path, device="cpu")
+    except (zipfile.BadZipFile, KeyError, ValueError, EOFError, RuntimeError) as exc:
+        raise AgentLoadError(f"cannot load {algo.upper()} model {model_path}: {exc}") from exc
+    norm = None
+    if normalize is not False and (not isinstance(normalize, dict)
+                                   or normalize.get("norm_obs", True)):
+        norm = _pickled_stats(stats, model_path)
+    return PickledRun(model, norm, algo, run_dir, model_path, cfg)
+
+
+def _run_config(run_dir: Path, model_path: Path) -> dict:
+    """``config.yml`` beside a pickled model; a missing or malformed one is an error."""
+    import yaml
+
+    if not (run_dir / CONFIG_FILE).is_file():
+        raise AgentLoadError(f"agent {model_path} is incomplete: {CONFIG_FILE} (algorithm, "
+                             "normalisation) is missing beside it")
+    try:
+        return read_config(run_dir)
+    except yaml.YAMLError as exc:
+        raise AgentLoadError(f"{run_dir / CONFIG_FILE} is not valid YAML: {exc}") from None
+
+
+def _pickled_stats(stats: Path, model_path: Path) -> ObsNormalization:
+    """The observation statistics of a pickled ``vecnormalize.pkl``."""
+    import pickle
+
+    if not stats.is_file():
+        raise AgentLoadError(f"agent {model_path} is incomplete: its observation "
+                             f"statistics {stats.name} are missing ({CONFIG_FILE} says "
+                             "observations were normalised)")
+    try:
+        with open(stats, "rb") as fh:
+            vecnorm = pickle.load(fh)
+    except Exception as exc:  # noqa: BLE001 - any unpickling failure is a corrupt file
+        raise AgentLoadError(f"corrupt normalisation statistics {stats}: {exc}") from exc
+    if not hasattr(vecnorm, "obs_rms"):
+        raise AgentLoadError(f"{stats} does not hold VecNormalize statistics")
+    return ObsNormalization.of_stats(vecnorm.obs_rms, vecnorm.clip_obs, vecnorm.epsilon)
+
+
+def run_hybrid(config: dict) -> dict | None:
+    """The hybrid of a run from its ``config.yml`` (its ``residual`` hyperparameter).
+
+    Raises
+    ------
+    AgentLoadError
+        If the recorded ``residual`` is not a valid ResidualSpec.
+    """
+    return recorded_spec(ResidualSpec, (config.get("hyperparams") or {}).get("residual"),
+                         "config.yml: hyperparams.residual")
+
+
+def run_features(config: dict) -> dict | None:
+    """The input features of a run from its ``config.yml`` (its ``features`` hyperparameter).
+
+    Raises
+    ------
+    AgentLoadError
+        If the recorded ``features`` is not a valid FeatureSpec.
+    """
+    return recorded_spec(FeatureSpec, (config.get("hyperparams") or {}).get("features"),
+                         "config.yml: hyperparams.features")

@@ -1,0 +1,277 @@
+"""Hyperparameter files (``configs/<algo>.yml``) and env kwargs: read, checked, resolved.
+
+A hyperparameter file is YAML keyed by env id with a ``default`` block (rl-baselines3-zoo's
+layout); besides the algorithm's keyword arguments it holds ``train.py``'s own keys
+(:data:`RUN_KEYS`). Every check raises :class:`ConfigError` with a message that names
+the file, the key and the valid values.
+"""
+
+from __future__ import annotations
+
+import difflib
+import inspect
+import math
+from pathlib import Path
+
+import gymnasium as gym
+
+from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
+from ..common.features import FeatureSpec
+from ..common.jsonio import to_jsonable
+from ..hybrids.residual_spec import ResidualSpec
+
+__all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_KEYS",
+           "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
+           "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
+           "check_env_id", "algo_class"]
+
+CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
+            "checkpoint_freq", "residual", "features")
+NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
+
+# A fixed value the user types clears the config's random range of the same quantity.
+RANGE_OF = {"eccentricity": ("eccentricity_range",), "masses": ("mass_range",),
+            "initial_theta": ("init_theta_range",), "initial_lengths": ("init_length_range",)}
+# Per-tether lists: a config's list with equal entries applies to any number of bodies.
+PER_TETHER = ("masses", "initial_lengths", "initial_theta")
+
+
+class ConfigError(ValueError):
+    """A hyperparameter file, command-line value or env kwarg is invalid."""
+
+
+SCHEDULE_KEYS = ("learning_rate", "clip_range")
+"""Hyperparameters that may be written ``lin_<start>`` (rl-baselines3-zoo's notation)."""
+
+
+def _linear(start: float):
+    """SB3 schedule falling linearly from ``start`` to 0 over the run (progress 1 -> 0)."""
+    def schedule(progress_remaining: float) -> float:
+        return progress_remaining * start
+
+    return schedule
+
+
+def _lin_start(value: str) -> float:
+    """The start of a ``lin_<start>`` value; NaN when it is not one."""
+    try:
+        return float(value[4:]) if value.startswith("lin_") else math.nan
+    except ValueError:
+        return math.nan
+
+
+def _check_schedule(key: str, value, source: str) -> None:
+    """Raise ConfigError unless a ``lin_<start>`` value has a positive number after ``lin_``."""
+    if isinstance(value, str):
+        start = _lin_start(value)
+        if not start > 0.0 or not math.isfinite(start):
+            raise ConfigError(f"{source}: {key}: {value!r} must be a number or 'lin_<start>' "
+                              "with a start > 0 (falls linearly to 0 over the run)")
+
+
+def with_schedules(params: dict) -> dict:
+    """``params`` with every ``lin_<start>`` value of :data:`SCHEDULE_KEYS` made a schedule."""
+    return {k: (_linear(_lin_start(v)) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
+            for k, v in params.items()}
+
+
+def algo_class(algo: str):
+    """stable-baselines3's class of ``algo`` (``"ppo"`` or ``"sac"``)."""
+    from stable_baselines3 import PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC}[algo]
+
+
+def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
+    """Hyperparameters for ``env_id`` from a YAML file keyed by env id with a ``default`` block.
+
+    The env id's block overrides ``default``. (rl-baselines3-zoo reads only the env
+    id's block, so the shipped files keep that block complete and put only
+    ``train.py``'s own keys, ``eval_freq`` and ``checkpoint_freq``, in ``default``.)
+
+    Raises
+    ------
+    ConfigError
+        On a missing file, a malformed document or an unknown key (the message lists
+        the valid keys).
+    """
+    import yaml
+
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file {str(path)!r} does not exist")
+    with open(path) as fh:
+        try:
+            doc = yaml.safe_load(fh) or {}
+        except yaml.YAMLError as exc:
+            raise ConfigError(f"{path} is not valid YAML: {exc}") from exc
+    if not isinstance(doc, dict) or not all(isinstance(v, (dict, type(None)))
+                                            for v in doc.values()):
+        raise ConfigError(f"{path} must map env ids (and 'default') to hyperparameters")
+    params = dict(doc.get("default") or {})
+    params.update(doc.get(env_id) or {})
+    valid_algo = set(inspect.signature(algo_class(algo).__init__).parameters) - {
+        "self", "env", "policy", "_init_setup_model", "tensorboard_log", "verbose", "seed",
+        "device"}
+    valid = set(RUN_KEYS) | valid_algo
+    unknown = sorted(set(params) - valid)
+    if unknown:
+        raise ConfigError(f"unknown key(s) {unknown} in {path} for {algo.upper()}; valid keys: "
+                          f"{sorted(valid)}")
+    norm = params.get("normalize", False)
+    if isinstance(norm, dict):
+        bad = sorted(set(norm) - set(NORMALIZE_KEYS))
+        if bad:
+            raise ConfigError(f"unknown normalize key(s) {bad}; valid: {list(NORMALIZE_KEYS)}")
+    elif not isinstance(norm, bool):
+        raise ConfigError(f"normalize must be true, false or a dict, got {norm!r}")
+    for key in ("n_envs", "n_timesteps", "eval_freq", "checkpoint_freq"):
+        if key in params:
+            value = params[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 1 \
+                    or value != int(value):
+                raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
+    if not isinstance(params.get("env_kwargs") or {}, dict):
+        raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
+    for key in SCHEDULE_KEYS:
+        if key in params:
+            _check_schedule(key, params[key], str(path))
+    if "residual" in params:
+        residual_spec(params["residual"], str(path))
+    if "features" in params:
+        feature_spec(params["features"], str(path))
+    return params
+
+
+def residual_spec(value, source: str) -> ResidualSpec | None:
+    """The validated ``residual`` key of a config (None: no hybrid).
+
+    ``residual: {base: smc, scale: 0.2, filter: true}`` trains the residual of the
+    hybrid u = filter(clip(u_smc + scale * a, -1, 1))
+    (:mod:`tether_gym_agents.training.residual_env`).
+
+    Raises
+    ------
+    ConfigError
+        On an unknown key or value (the message names the valid ones).
+    """
+    return _config_spec(ResidualSpec, value, f"{source}: residual")
+
+
+def feature_spec(value, source: str) -> FeatureSpec | None:
+    """The validated ``features`` key of a config (None: the observation alone).
+
+    ``features: {name: symlog_errors, scale: 0.001}`` makes the policy's network see
+    symlog(e / S) and symlog(e' / S) beside the observation
+    (:mod:`tether_gym_agents.common.features`).
+    """
+    return _config_spec(FeatureSpec, value, f"{source}: features")
+
+
+def _config_spec(cls, value, what: str):
+    """``cls.from_dict(value)``, None for None; a bad value is a ConfigError."""
+    if value is None:
+        return None
+    try:
+        return cls.from_dict(value, what)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def rate_mode_for(spec: ResidualSpec | None, env_kwargs: dict, source: str,
+                   notes: list[str]) -> dict:
+    """``env_kwargs`` with ``action_mode="rate"`` when a residual hybrid is trained."""
+    if spec is None:
+        return env_kwargs
+    mode = env_kwargs.get("action_mode")
+    if mode is None:
+        notes.append(f"{source}'s residual sets action_mode='rate' (the hybrid commands reel "
+                     "rates)")
+        return {**env_kwargs, "action_mode": "rate"}
+    if mode != "rate":
+        raise ConfigError(f"{source}: residual needs action_mode 'rate' (the hybrid commands "
+                          f"reel rates), but env kwargs give action_mode={mode!r}; remove it "
+                          "or set it to 'rate'")
+    return env_kwargs
+
+
+def parse_env_kwargs(items: list[str]) -> dict:
+    """``--env-kwargs key=value ...`` as a dict (:mod:`tether_gym_agents.common.env_kwargs`).
+
+    Raises
+    ------
+    ConfigError
+        On a malformed entry or a value that is not a Python literal (no code is
+        evaluated); the message names the flag and the entry.
+    """
+    try:
+        return _parse_env_kwargs(items, flag="--env-kwargs")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+
+
+def resolve_env_kwargs(config_kwargs: dict, user_kwargs: dict, source: str,
+                       default_n_bodies: int = 3) -> tuple[dict, list[str]]:
+    """Env kwargs of a run: the user's values win over the config's.
+
+    * A fixed value typed by the user clears the config's random range of the same
+      quantity (``eccentricity`` clears ``eccentricity_range``, ``masses`` clears
+      ``mass_range``, ``initial_theta`` clears ``init_theta_range``,
+      ``initial_lengths`` clears ``init_length_range``), unless the user typed the
+      range too.
+    * A per-tether list of the config (``masses``, ``initial_lengths``,
+      ``initial_theta``) whose entries are all equal applies to any ``n_bodies``; an
+      unequal one of the wrong length is an error naming the config line.
+
+    Returns
+    -------
+    kwargs : dict
+        The resolved env kwargs (plain lists, no tuples).
+    notes : list of str
+        What was changed, to print.
+    """
+    config_kwargs = dict(config_kwargs or {})
+    notes = []
+    for key in user_kwargs:
+        for range_key in RANGE_OF.get(key, ()):
+            if range_key in config_kwargs and range_key not in user_kwargs:
+                notes.append(f"--env-kwargs {key}={user_kwargs[key]!r} clears {source}'s "
+                             f"{range_key}: {config_kwargs[range_key]!r}")
+                del config_kwargs[range_key]
+    kwargs = to_jsonable({**config_kwargs, **user_kwargs})
+    n_bodies = kwargs.get("n_bodies", default_n_bodies)
+    if isinstance(n_bodies, int) and not isinstance(n_bodies, bool) and n_bodies >= 2:
+        n = n_bodies - 1
+        for key in PER_TETHER:
+            value = kwargs.get(key)
+            if key in user_kwargs or not isinstance(value, list) or len(value) == n:
+                continue
+            if value and all(v == value[0] for v in value):
+                kwargs[key] = [value[0]] * n
+                notes.append(f"{source}'s {key}: {value!r} applied to n_bodies={n_bodies} as "
+                             f"{kwargs[key]!r}")
+            else:
+                raise ConfigError(f"{source}: env_kwargs {key}: {value!r} has {len(value)} "
+                                  f"entries, but n_bodies={n_bodies} needs {n}; give {key} in "
+                                  "--env-kwargs or edit that line")
+    return kwargs, notes
+
+
+def check_env(env_id: str, kwargs: dict, items: list[str], source: str) -> None:
+    """Build the env once with the resolved kwargs: bad values fail here, before training."""
+    try:
+        env = gym.make(env_id, **kwargs)
+    except (ValueError, TypeError) as exc:
+        typed = f"--env-kwargs {' '.join(items)}" if items else "no --env-kwargs"
+        raise ConfigError(f"invalid env kwargs ({typed}; {source}): {exc}") from None
+    env.close()
+
+
+def check_env_id(env_id: str) -> None:
+    """Raise ConfigError for an unregistered env id (with a "did you mean")."""
+    ids = [i for i in gym.registry if i.startswith("tether_gym/")]
+    if env_id not in gym.registry:
+        close = difflib.get_close_matches(env_id, ids or list(gym.registry), n=1)
+        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        raise ConfigError(f"unknown env id {env_id!r}{hint}; tether_gym ids: {ids}")

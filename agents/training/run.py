@@ -1,0 +1,201 @@
+"""One training run: :func:`train` takes a :class:`~.settings.TrainSettings` and trains.
+
+It reads as the run goes: settings -> envs -> model (new, or the resume point) -> the
+records (``config.yml``, ``args.yml``, ``command.txt``) -> callbacks -> learn -> the
+saved model, the final agent and ``train_info.json``. The folder it fills is described
+in :mod:`tether_gym_agents.files.run_folder`.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import tether_gym
+
+from ..files.run_folder import (
+    FINAL_AGENT_DIR,
+    FINAL_MODEL_FILE,
+    REPLAY_BUFFER_FILE,
+    TB_DIR,
+    VECNORMALIZE_FILE,
+    append_command,
+    evaluations_path,
+    read_train_info,
+    write_args,
+    write_config,
+)
+from .config import algo_class, with_schedules
+from .settings import TrainSettings
+
+__all__ = ["RunSummary", "train", "make_venv"]
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What a call of :func:`train` did.
+
+    Attributes
+    ----------
+    out : Path
+        The run folder.
+    num_timesteps : int
+        Env steps the model has trained in all calls [-].
+    wall_s : float
+        Wall time of this call's training [s].
+    total_wall_s : float
+        Wall time of every call of the run, killed ones included [s].
+    """
+
+    out: Path
+    num_timesteps: int
+    wall_s: float
+    total_wall_s: float
+
+
+def make_venv(settings: TrainSettings, n_envs: int, seed: int):
+    """The (monitored) training or evaluation vec env; the hybrid's with a residual.
+
+    The residual wrapper sits below ``VecNormalize`` (added by the caller): its base
+    law and filter read raw observations. The policy's input features are appended
+    above it, also below ``VecNormalize``.
+    """
+    from stable_baselines3.common.vec_env import VecEnv, VecMonitor
+
+    from .vec_env import make_sb3_vec_env
+
+    venv: VecEnv
+    if settings.env_id == tether_gym.ENV_ID:
+        venv = make_sb3_vec_env(n_envs, seed=seed, env_kwargs=settings.env_kwargs)
+    else:  # any other registered id: SB3's generic path
+        from stable_baselines3.common.env_util import make_vec_env
+
+        venv = make_vec_env(settings.env_id, n_envs=n_envs, seed=seed,
+                            env_kwargs=settings.env_kwargs)
+    if settings.residual is not None:
+        from .residual_env import ResidualVecEnv
+
+        venv = ResidualVecEnv.from_spec(venv, settings.residual)
+    if settings.features is not None:
+        from .vec_env import FeatureVecEnv
+
+        venv = FeatureVecEnv(venv, settings.features)
+    return VecMonitor(venv)
+
+
+def train(settings: TrainSettings) -> RunSummary:
+    """Train one run into ``settings.out`` (a new run, or ``settings.resume``).
+
+    Raises
+    ------
+    ConfigError
+        When a resumed run has no loadable saved model.
+    """
+    import torch
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    from .callbacks import make_callbacks, save_safe_agent
+    from .curves import plot_learning_curve
+
+    # SB3 may add entries to the hyperparameters' mappings (SAC: policy_kwargs.use_sde):
+    # this run's own copy takes them, and config.yml records them, as it always did
+    settings = replace(settings, hyperparams=copy.deepcopy(settings.hyperparams))
+    torch.set_num_threads(settings.options.torch_threads)
+    out = settings.out
+    out.mkdir(parents=True, exist_ok=True)
+    print(f"env {settings.env_id} with env kwargs {json.dumps(settings.env_kwargs)}")
+    for note in settings.notes:
+        print(f"  note: {note}")
+    previous = read_train_info(out) if settings.resume else {}
+    model, venv, eval_env = _model(settings)
+    _write_records(settings)
+    callbacks = make_callbacks(settings, eval_env, float(previous.get("wall_time_s", 0.0)),
+                               hasattr(model, "replay_buffer"))
+    if settings.resume:  # the learning curve continues, not restarts
+        _continue_curve(callbacks.evaluator, out, int(model.num_timesteps))
+    t0 = time.perf_counter()
+    model.learn(settings.timesteps, callback=list(callbacks),
+                progress_bar=not settings.options.no_progress,
+                reset_num_timesteps=not settings.resume, tb_log_name=settings.algo)
+    wall = time.perf_counter() - t0
+    model.save(out / FINAL_MODEL_FILE)
+    env = model.get_env()
+    if isinstance(env, VecNormalize):
+        env.save(str(out / VECNORMALIZE_FILE))
+    if hasattr(model, "replay_buffer"):
+        model.save_replay_buffer(out / REPLAY_BUFFER_FILE)
+    save_safe_agent(settings, model, env, FINAL_AGENT_DIR)
+    total_wall = callbacks.progress.write("finished")
+    plot_learning_curve(out)
+    venv.close()
+    eval_env.close()
+    print(f"trained {settings.algo.upper()} to step {model.num_timesteps} in {wall:.0f} s "
+          f"({total_wall:.0f} s in all calls); run folder {out}; evaluate with "
+          f"`python evaluate.py {out}`")
+    return RunSummary(out, int(model.num_timesteps), wall, total_wall)
+
+
+def _model(settings: TrainSettings):
+    """(model, training env, evaluation env): a new model, or the resume point's."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    venv = make_venv(settings, settings.n_envs, settings.seed)
+    eval_env = make_venv(settings, 1, settings.seed + 10_000)
+    if settings.residual is not None:
+        print(f"  residual hybrid: {json.dumps(settings.residual.to_dict())}: the agent learns "
+              "a in u = filter(clip(u_smc + scale * a, -1, 1))")
+    algo_cls = algo_class(settings.algo)
+    tb_log = str(settings.out / TB_DIR)
+    if settings.resume:
+        return _resumed_model(settings, algo_cls, venv, eval_env)
+    norm = settings.normalize
+    if norm is not False:
+        norm_kwargs = norm if isinstance(norm, dict) else {}
+        gamma = settings.hyperparams.get("gamma", 0.99)
+        venv = VecNormalize(venv, gamma=gamma, **norm_kwargs)
+        eval_env = VecNormalize(eval_env, gamma=gamma, training=False,
+                                norm_obs=norm_kwargs.get("norm_obs", True), norm_reward=False,
+                                clip_obs=norm_kwargs.get("clip_obs", 10.0))
+    model = algo_cls(settings.run.get("policy", "MlpPolicy"), venv, seed=settings.seed,
+                     device="cpu", tensorboard_log=tb_log, verbose=settings.options.verbose,
+                     **with_schedules(settings.hyperparams))
+    return model, venv, eval_env
+
+
+def _resumed_model(settings: TrainSettings, algo_cls, venv, eval_env):
+    """The newest good saved model of the run, with its envs; TensorBoard cut to its step."""
+    from .resume import load_resume_point, truncate_tensorboard
+
+    model, venv, eval_env, model_path, buffer_loaded = load_resume_point(
+        settings.out, algo_cls, venv, eval_env, settings.normalize is not False,
+        str(settings.out / TB_DIR))
+    start = int(model.num_timesteps)
+    removed = truncate_tensorboard(settings.out / TB_DIR, start)
+    print(f"resuming from {model_path} at step {start}"
+          + (f" with its replay buffer "
+             f"({model.replay_buffer.size() * model.replay_buffer.n_envs} transitions)"
+             if buffer_loaded else "")
+          + (f"; {removed} TensorBoard events after step {start} removed" if removed else ""))
+    return model, venv, eval_env
+
+
+def _write_records(settings: TrainSettings) -> None:
+    """``config.yml``, ``args.yml`` and a line of ``command.txt``."""
+    write_config(settings.out, settings.resolved_config())
+    write_args(settings.out, settings.options.as_dict())
+    append_command(settings.out, settings.command_line)
+
+
+def _continue_curve(evaluator, out: Path, step: int) -> None:
+    """Seed the evaluator with the run's evaluations up to ``step``; report dropped ones."""
+    from .resume import continue_eval_history
+
+    if not evaluations_path(out).is_file():
+        return
+    dropped = continue_eval_history(evaluator, out, step)
+    if dropped:
+        print(f"  dropped {dropped} evaluation(s) after step {step} from "
+              f"{evaluations_path(out)} (the resumed run repeats those steps)")
