@@ -1,4 +1,5 @@
-"""SafetyFilterWrapper: gymnasium's env checker, the info entries, rate mode only."""
+"""SafetyFilterWrapper: gymnasium's env checker, the info entries, rate mode only; the
+filter in the loop (FilterInTheLoop) that it shares with the agents' hybrids."""
 
 from __future__ import annotations
 
@@ -11,7 +12,14 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import tether_gym
-from tether_gym.wrappers import INFO_KEYS, SafetyFilterWrapper, state_of
+from tether_gym.safety import SafetyFilter
+from tether_gym.wrappers import (
+    IDLE_INFO,
+    INFO_KEYS,
+    FilterInTheLoop,
+    SafetyFilterWrapper,
+    state_of,
+)
 
 
 def _env(**kwargs):
@@ -73,7 +81,75 @@ def test_state_of_reads_the_true_state():
 
 
 def test_rejects_other_action_modes():
-    env = gym.make(tether_gym.ENV_ID)  # v1's default: increments of the command
+    env = gym.make(tether_gym.ENV_ID)  # the default: increments of the command
     with pytest.raises(ValueError, match="action_mode='rate'"):
         SafetyFilterWrapper(env)
+    env.close()
+
+
+def test_rejects_a_filter_for_another_number_of_tethers():
+    four = gym.make(tether_gym.ENV_ID, n_bodies=4, action_mode="rate")
+    env = _env()
+    with pytest.raises(ValueError, match="filter is for 3 tethers, the env has 2"):
+        SafetyFilterWrapper(env, SafetyFilter.for_env(four))
+    with pytest.raises(TypeError, match="TetherLibration"):
+        SafetyFilterWrapper(gym.make("Pendulum-v1"))
+    env.close()
+    four.close()
+
+
+# -- the filter in the loop ------------------------------------------------------------
+
+def _states(env, rows):
+    """(nu (rows,), y (rows, 8)) of the first ``rows`` steps of a filtered full reel-in."""
+    env = SafetyFilterWrapper(env)
+    _, info = env.reset(seed=0)
+    nus, ys = [], []
+    for _ in range(rows):
+        nu, y = state_of(info)
+        nus.append(nu)
+        ys.append(y)
+        _, _, _, _, info = env.step(np.array([-1.0, 0.0], np.float32))
+    return np.array(nus), np.array(ys)
+
+
+def test_filter_in_the_loop_is_the_filter_with_counters():
+    env = _env(initial_lengths=(0.1, 0.9))
+    flt = SafetyFilter.for_env(env)
+    nu, y = _states(env, 40)
+    desired = np.tile([-1.0, 0.0], (40, 1))
+    loop = FilterInTheLoop(flt, 2)
+    assert np.isnan(loop.filter_rate) and loop.info() == dict(IDLE_INFO)
+    out = loop((nu, y), desired)
+    res = flt.project(nu, y, desired)
+    np.testing.assert_array_equal(out, res.command)
+    np.testing.assert_array_equal(loop.last_active, res.active)
+    assert 0 < loop.interventions == int(res.active.sum()) < loop.steps == 40
+    assert loop.filter_rate == loop.interventions / 40
+    i = int(np.flatnonzero(res.active)[0])
+    assert loop.info(i) == {"filter_active": True, "filter_correction": float(res.correction[i]),
+                            "filter_feasible": bool(res.feasible[i])}
+    assert tuple(loop.info(i)) == INFO_KEYS
+    loop.reset_counts()
+    assert (loop.steps, loop.interventions, loop.infeasible, loop.last_result) == (0, 0, 0, None)
+    env.close()
+
+
+def test_without_a_filter_commands_pass_and_the_state_is_not_read():
+    loop = FilterInTheLoop(None, 2)
+    command = np.array([[0.3, -2.0]])
+
+    def state():
+        raise AssertionError("the state source is read only when there is a filter")
+
+    np.testing.assert_array_equal(loop(state, command), command)
+    assert loop.steps == 0 and loop.last_active is None and loop.info() == dict(IDLE_INFO)
+
+
+def test_filter_in_the_loop_checks_its_filter():
+    with pytest.raises(TypeError, match="SafetyFilter or None"):
+        FilterInTheLoop("filter", 2)  # type: ignore[arg-type]
+    env = _env()
+    with pytest.raises(ValueError, match="filter is for 2 tethers, the env has 3"):
+        FilterInTheLoop(SafetyFilter.for_env(env), 3)
     env.close()

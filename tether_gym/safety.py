@@ -1,4 +1,4 @@
-"""A model-based safety filter for the reel commands (issue 12).
+"""A model-based safety filter for the reel commands.
 
 The filter replaces a desired reel-rate command by the closest command (Euclidean, in
 the normalised command box [-1, 1]^n) whose predicted next control step keeps every
@@ -43,11 +43,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .params import check_range
 from .physics import kernels
 from .physics.layout import at
 from .physics.state import PARAMS, STATE, P
 
-__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN"]
+__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN", "env_config"]
 
 DEFAULT_MARGIN = 0.5
 """Tension margin T^_min [-] when the configuration gives none: the reward's T_safe."""
@@ -75,8 +76,49 @@ class FilterResult(NamedTuple):
     """(B, n) predicted smallest T^ over the step under the returned command [-]."""
 
 
+def env_config(env: Any):
+    """The :class:`~tether_gym.envs.config.EnvConfig` of a TetherLibration env.
+
+    ``env`` is the env, wrapped or not, its vector env, a stable-baselines3 VecEnv of
+    it (its first sub-env's, by ``get_attr``), or any object whose ``config`` (or
+    ``unwrapped.config``) is an EnvConfig.
+
+    Raises
+    ------
+    TypeError
+        Naming the type of ``env`` when it has no such configuration.
+    """
+    cfg = getattr(getattr(env, "unwrapped", env), "config", None)
+    if cfg is None and callable(getattr(env, "get_attr", None)):
+        try:
+            cfg = env.get_attr("config", indices=[0])[0]
+        except AttributeError:
+            cfg = None
+    if cfg is None or not hasattr(cfg, "param_rows"):
+        raise TypeError(f"env must be a tether_gym/TetherLibration env (wrapped or vector), "
+                        f"got {type(env).__name__} without its config")
+    return cfg
+
+
 class SafetyFilter:
     """Projection of reel-rate commands onto the predicted-safe set of the next step.
+
+    It guards exactly two constraints per tether j, predicted for the next control
+    step on the *nominal* model without disturbance (formulas in the module
+    docstring):
+
+    * tension: the smallest T^_j at the physics substep boundaries of the step is
+      >= ``margin`` (the env fails with ``slack`` at T^_j <= 0);
+    * length: the braking-stop length l_j,stop at the end of the step lies in
+      [l_min + ``length_margin``, l_max - ``length_margin``] (the env fails with
+      ``length`` outside [l_min, l_max]).
+
+    Nothing else: not tumbling (|theta_j| >= pi/2), the reference tracking, the reel
+    effort or any step after the next (only the braking distance looks further). The
+    prediction knows neither the disturbance nor the observation noise, nor the true e
+    and masses when they differ from the nominal ones, and it starts from the state it
+    is given (true or observed: the caller's choice,
+    :class:`tether_gym.wrappers.FilterInTheLoop`).
 
     Parameters
     ----------
@@ -109,32 +151,23 @@ class SafetyFilter:
     def __init__(self, params, n_tethers: int, max_reel_rate: float, physics_step: float,
                  substeps: int, length_bounds: tuple[float, float],
                  margin: float = DEFAULT_MARGIN, length_margin: float = 0.0):
-        if isinstance(n_tethers, bool) or not isinstance(n_tethers, (int, np.integer)) \
-                or n_tethers < 1:
-            raise ValueError(f"n_tethers={n_tethers!r} must be an int >= 1")
-        self.n = int(n_tethers)
+        self.n = _count("n_tethers", n_tethers)
         par = np.ascontiguousarray(np.asarray(params, dtype=float).reshape(1, -1))
         if par.shape[1] != PARAMS.size(self.n):
             raise ValueError(f"params of shape {np.shape(params)} do not fit {self.n} tethers "
                              f"(need ({PARAMS.size(self.n)},), a row of EnvConfig.param_rows)")
         self.par = par
-        self.max_reel_rate = _positive("max_reel_rate", max_reel_rate)
-        self.physics_step = _positive("physics_step", physics_step)
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) \
-                or substeps < 1:
-            raise ValueError(f"substeps={substeps!r} must be an int >= 1")
-        self.substeps = int(substeps)
+        self.max_reel_rate = check_range("max_reel_rate", max_reel_rate, 0.0, low_open=True)
+        self.physics_step = check_range("physics_step", physics_step, 0.0, low_open=True)
+        self.substeps = _count("substeps", substeps)
         lo, hi = (float(v) for v in length_bounds)
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
             raise ValueError(f"length_bounds={length_bounds!r} must be finite with "
                              "0 <= low < high")
         self.length_bounds = (lo, hi)
-        self.margin = _positive("margin", margin)
-        lm = float(length_margin)
-        if not (math.isfinite(lm) and 0.0 <= lm < 0.5 * (hi - lo)):
-            raise ValueError(f"length_margin={length_margin!r} must lie in [0, "
-                             f"{0.5 * (hi - lo):g}) (half the length range {lo:g}..{hi:g})")
-        self.length_margin = lm
+        self.margin = check_range("margin", margin, 0.0, low_open=True)
+        self.length_margin = check_range("length_margin", length_margin, 0.0, 0.5 * (hi - lo),
+                                         high_open=True)  # half the length range
         self.accel_bound = float(par[0, at(P.accel_bound, self.n)])
         self.eccentricity = float(par[0, at(P.eccentricity, self.n)])
         self._substeps = kernels.Substeps(self.physics_step, self.substeps)
@@ -169,10 +202,7 @@ class SafetyFilter:
             model when they differ from the env's (model-mismatch studies); None takes
             the env's configured ones.
         """
-        base = env.unwrapped if hasattr(env, "unwrapped") else env
-        cfg = getattr(base, "config", None)
-        if cfg is None or not hasattr(cfg, "param_rows"):
-            raise TypeError(f"env must be a TetherLibration env, got {type(env).__name__}")
+        cfg = env_config(env)
         par = cfg.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
                              cfg.masses if masses is None else masses)
         if margin is None:
@@ -427,11 +457,11 @@ class SafetyFilter:
         return cands[r, idx], any_ok, tension[r, idx], slack[r, idx]
 
 
-def _positive(name: str, value) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name}={value!r} must be a finite number > 0")
-    return v
+def _count(name: str, value) -> int:
+    """``int(value)`` after checking it is an int >= 1 (ValueError naming it otherwise)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name}={value!r} must be an int >= 1")
+    return int(value)
 
 
 def _lattice_size(n: int) -> int:

@@ -1,19 +1,42 @@
-"""Gymnasium wrappers of the TetherLibration env: the safety filter in the loop."""
+"""The safety filter in the loop: one filter step for every user, and its gymnasium wrapper.
+
+:class:`FilterInTheLoop` is the one place where a reel-rate command meets a
+:class:`~tether_gym.safety.SafetyFilter`: given the state the filter predicts from and
+the desired commands, it returns the commands to send with the filter's
+:class:`~tether_gym.safety.FilterResult`, counts the interventions and gives each row's
+``info`` entries (:data:`INFO_KEYS`). The caller chooses the state source: the env's
+true state from its ``info`` (:func:`state_of`) or the state read from an observation
+(``tether_gym_agents.common.obs.ObservationLayout.state``).
+:class:`SafetyFilterWrapper` puts it around a gymnasium env (true state); the hybrid
+policies and the residual training of ``tether_gym_agents`` use it on observations.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from types import MappingProxyType
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
+from .envs.actions import require_rate_mode
 from .physics import STATE
-from .safety import FilterResult, SafetyFilter
+from .safety import FilterResult, SafetyFilter, env_config
 
-__all__ = ["SafetyFilterWrapper", "INFO_KEYS", "state_of"]
+__all__ = ["SafetyFilterWrapper", "FilterInTheLoop", "INFO_KEYS", "IDLE_INFO", "state_of"]
 
-INFO_KEYS = ("filter_active", "filter_correction", "filter_feasible")
-"""Entries the wrapper adds to every step's and reset's ``info``."""
+IDLE_INFO = MappingProxyType({"filter_active": False, "filter_correction": 0.0,
+                              "filter_feasible": True})
+"""The filter's ``info`` entries of a step it did not filter (after a reset, or no filter)."""
+
+INFO_KEYS = tuple(IDLE_INFO)
+"""Entries a filter in the loop adds to every step's ``info``: ``filter_active`` (bool,
+the command was changed), ``filter_correction`` (float, |u_filtered - u| [-]) and
+``filter_feasible`` (bool, the command sent meets every predicted constraint)."""
+
+State = tuple[float | np.ndarray, np.ndarray]
+"""(nu [rad], scalar or (B,); state rows (B, 4n) in the STATE layout)."""
 
 
 def state_of(info: dict) -> tuple[float, np.ndarray]:
@@ -26,20 +49,97 @@ def state_of(info: dict) -> tuple[float, np.ndarray]:
                                               for key in STATE.names])
 
 
+class FilterInTheLoop:
+    """A safety filter (or none) between the commands of a policy and a rate-mode env.
+
+    Parameters
+    ----------
+    safety_filter : SafetyFilter or None
+        The filter; None passes every command through unchanged.
+    n_tethers : int
+        n = N - 1 of the env the commands go to (the filter must be for as many).
+
+    Raises
+    ------
+    TypeError
+        If ``safety_filter`` is neither a SafetyFilter nor None.
+    ValueError
+        If the filter is for another number of tethers.
+
+    Notes
+    -----
+    Counters since construction or :meth:`reset_counts`: ``steps`` (filtered commands,
+    one per row), ``interventions`` (of those, the ones the filter changed),
+    ``infeasible`` (the ones with no command meeting every constraint); ``last_result``
+    and ``last_active`` ((B,) bool) describe the last call (None without a filter).
+    """
+
+    def __init__(self, safety_filter: SafetyFilter | None, n_tethers: int):
+        if not (safety_filter is None or isinstance(safety_filter, SafetyFilter)):
+            raise TypeError(f"safety_filter must be a SafetyFilter or None, got "
+                            f"{type(safety_filter).__name__}")
+        if safety_filter is not None and safety_filter.n != n_tethers:
+            raise ValueError(f"the filter is for {safety_filter.n} tethers, the env has "
+                             f"{n_tethers}")
+        self.safety_filter = safety_filter
+        self.n_tethers = int(n_tethers)
+        self.reset_counts()
+
+    def reset_counts(self) -> None:
+        """Set the counters to zero and forget the last result."""
+        self.steps = 0
+        self.interventions = 0
+        self.infeasible = 0
+        self.last_result: FilterResult | None = None
+        self.last_active: np.ndarray | None = None
+
+    @property
+    def filter_rate(self) -> float:
+        """interventions / steps (NaN before the first filtered command)."""
+        return self.interventions / self.steps if self.steps else float("nan")
+
+    def __call__(self, state: State | Callable[[], State], command) -> np.ndarray:
+        """The commands to send (B, n) float64 for the desired ``command`` (B, n).
+
+        ``state`` is the state the filter predicts from, or a function returning it
+        (called only when there is a filter). Without a filter the commands come back
+        unchanged; with one, as :meth:`SafetyFilter.project` returns them.
+        """
+        command = np.asarray(command, dtype=np.float64)
+        if self.safety_filter is None:
+            return command
+        nu, y = state() if callable(state) else state
+        res = self.safety_filter.project(nu, y, command)
+        self.last_result = res
+        self.last_active = res.active.copy()
+        self.steps += int(res.active.shape[0])
+        self.interventions += int(res.active.sum())
+        self.infeasible += int((~res.feasible).sum())
+        return res.command
+
+    def info(self, row: int = 0) -> dict[str, Any]:
+        """Row ``row``'s :data:`INFO_KEYS` entries of the last call (idle without one)."""
+        res = self.last_result
+        if res is None:
+            return dict(IDLE_INFO)
+        return {"filter_active": bool(res.active[row]),
+                "filter_correction": float(res.correction[row]),
+                "filter_feasible": bool(res.feasible[row])}
+
+
 class SafetyFilterWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
     """Filter every action of a rate-mode TetherLibration env through a :class:`SafetyFilter`.
 
-    The action (normalised reel-rate command in [-1, 1]^n) is replaced by
-    ``filter.project(nu, state, action).command`` at the state the env is in (read from
+    The action (normalised reel-rate command in [-1, 1]^n) is replaced by the
+    filtered command (:class:`FilterInTheLoop`) at the state the env is in (read from
     the last ``info``, the true state, not the possibly noisy observation), and ``info``
-    gets ``filter_active`` (bool), ``filter_correction`` (float, |a_filtered - a| [-])
-    and ``filter_feasible`` (bool) of that step (False, 0.0, True after a reset).
+    gets :data:`INFO_KEYS` of that step (:data:`IDLE_INFO` after a reset).
 
     Parameters
     ----------
     env : gymnasium.Env
         A ``tether_gym/TetherLibration`` env whose action is the command
-        (``action_mode="rate"``; v0 has no other mode).
+        (``action_mode="rate"``).
     safety_filter : SafetyFilter or None
         The filter; None builds ``SafetyFilter.for_env(env, **filter_kwargs)``.
     **filter_kwargs
@@ -47,8 +147,11 @@ class SafetyFilterWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
 
     Raises
     ------
+    TypeError
+        If ``env`` is not a TetherLibration env.
     ValueError
-        If the env's actions are not reel-rate commands.
+        If the env's actions are not reel-rate commands, or the filter is for another
+        number of tethers.
     """
 
     def __init__(self, env: gym.Env, safety_filter: SafetyFilter | None = None,
@@ -56,28 +159,30 @@ class SafetyFilterWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
         gym.utils.RecordConstructorArgs.__init__(self, safety_filter=safety_filter,
                                                  **filter_kwargs)
         gym.ActionWrapper.__init__(self, env)
-        cfg = getattr(env.unwrapped, "config", None)
-        if cfg is None:
-            raise TypeError(f"env must be a TetherLibration env, got {env.unwrapped!r}")
-        mode = getattr(cfg, "action_mode", "rate")
-        if str(getattr(mode, "value", mode)) != "rate":
-            raise ValueError(f"SafetyFilterWrapper filters reel-rate commands, but the env has "
-                             f"action_mode={mode!r}; wrap a rate-mode env: gym.make(..., "
-                             "action_mode='rate')")
-        self.safety_filter = (safety_filter if safety_filter is not None
-                              else SafetyFilter.for_env(env, **filter_kwargs))
-        if self.safety_filter.n != cfg.n_tethers:
-            raise ValueError(f"the filter is for {self.safety_filter.n} tethers, the env has "
-                             f"{cfg.n_tethers}")
+        cfg = env_config(env)
+        require_rate_mode(cfg.action_mode, type(self).__name__)
+        if safety_filter is None:
+            safety_filter = SafetyFilter.for_env(env, **filter_kwargs)
+        self.loop = FilterInTheLoop(safety_filter, cfg.n_tethers)
         self._state: tuple[float, np.ndarray] | None = None
-        self.last_result: FilterResult | None = None
+
+    @property
+    def safety_filter(self) -> SafetyFilter:
+        """The filter."""
+        assert self.loop.safety_filter is not None
+        return self.loop.safety_filter
+
+    @property
+    def last_result(self) -> FilterResult | None:
+        """The filter's answer for the last action (None after a reset)."""
+        return self.loop.last_result
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         """Reset the env and remember its state; the info reports an idle filter."""
         obs, info = self.env.reset(seed=seed, options=options)
         self._state = state_of(info)
-        self.last_result = None
-        info.update(filter_active=False, filter_correction=0.0, filter_feasible=True)
+        self.loop.last_result = None
+        info.update(IDLE_INFO)
         return obs, info
 
     def action(self, action):
@@ -89,19 +194,14 @@ class SafetyFilterWrapper(gym.ActionWrapper, gym.utils.RecordConstructorArgs):
             raise ValueError(f"action must have shape {self.action_space.shape}, got "
                              f"{act.shape}: {action!r}")
         nu, y = self._state
-        res = self.safety_filter.project(nu, y[None], act[None])
-        self.last_result = res
-        if not res.active[0]:
+        command = self.loop((nu, y[None]), act[None])
+        if not self.loop.info()["filter_active"]:
             return action
-        return res.command[0]  # float64: the env takes any real dtype
+        return command[0]  # float64: the env takes any real dtype
 
     def step(self, action):
         """Step the env with the filtered action; add the filter's entries to ``info``."""
         obs, reward, terminated, truncated, info = self.env.step(self.action(action))
         self._state = state_of(info)
-        res = self.last_result
-        assert res is not None
-        info.update(filter_active=bool(res.active[0]),
-                    filter_correction=float(res.correction[0]),
-                    filter_feasible=bool(res.feasible[0]))
+        info.update(self.loop.info())
         return obs, reward, terminated, truncated, info

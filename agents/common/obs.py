@@ -1,15 +1,52 @@
-"""Reading a TetherLibration observation and scaling reel rates to actions."""
+"""Reading a TetherLibration observation, scaling reel rates to actions, the rate mode.
+
+The policies of this package that command reel rates (the baselines, the hybrids)
+run on envs made with ``action_mode="rate"``: :data:`RATE_ENV_KWARGS` is that env
+argument, :func:`with_rate_mode` adds it to a user's env arguments (or refuses another
+mode) and :func:`require_rate_mode` (:mod:`tether_gym.envs.actions`) checks a built
+env's mode. :func:`require_predict` checks that an object is a policy (has
+stable-baselines3's ``predict``).
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import KW_ONLY, dataclass
 from typing import Any, NamedTuple
 
 import numpy as np
 
+from tether_gym.envs.actions import RATE, require_rate_mode
 from tether_gym.envs.layout import OBSERVATION
+from tether_gym.physics import STATE
+from tether_gym.safety import env_config
 
-__all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy"]
+__all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy", "RATE_ENV_KWARGS",
+           "require_rate_mode", "with_rate_mode", "require_predict"]
+
+RATE_ENV_KWARGS: dict[str, Any] = {"action_mode": RATE}
+"""The env arguments of the policies that command reel rates (do not modify: copy)."""
+
+
+def with_rate_mode(env_kwargs: Mapping[str, Any], who: str) -> dict[str, Any]:
+    """``env_kwargs`` with ``action_mode="rate"`` (a new dict).
+
+    Raises
+    ------
+    ValueError
+        If ``env_kwargs`` gives another ``action_mode``; the message names ``who`` (what
+        needs reel-rate actions) and the mode given.
+    """
+    mode = env_kwargs.get("action_mode", RATE)
+    require_rate_mode(mode, who)
+    return {**env_kwargs, **RATE_ENV_KWARGS}
+
+
+def require_predict(name: str, policy: Any) -> Any:
+    """``policy`` after checking it has a ``predict`` method (TypeError naming ``name``)."""
+    if not callable(getattr(policy, "predict", None)):
+        raise TypeError(f"{name} must have a predict method, got {type(policy).__name__}")
+    return policy
 
 
 class ObservedState(NamedTuple):
@@ -35,9 +72,6 @@ class ObservedState(NamedTuple):
     mass_fractions: np.ndarray | None
 
 
-assert ObservedState._fields == OBSERVATION.names, "ObservedState must follow OBSERVATION"
-
-
 @dataclass(frozen=True)
 class ObservationLayout:
     """Observation layout and action scaling of one env configuration.
@@ -51,29 +85,31 @@ class ObservationLayout:
     max_reel_rate : float
         l'_cmd at |u| = 1 [-].
     with_params : bool
-        Whether e and the mass fractions close the observation.
+        Whether e and the mass fractions close the observation (keyword only).
     with_eccentricity : bool
         Whether e closes the observation (implied by ``with_params``; alone with
-        ``observe_params="eccentricity"``).
+        ``observe_params="eccentricity"``; keyword only).
     action_mode : str
         The env's ``action_mode``: ``"rate"`` (the action is the command u) or
-        ``"increment"`` (the action changes u).
+        ``"increment"`` (the action changes u; keyword only).
     """
 
     n_tethers: int
     frequency: float
     max_reel_rate: float
+    _: KW_ONLY
     with_params: bool = False
-    action_mode: str = "rate"
     with_eccentricity: bool = False
+    action_mode: str = RATE
 
     @classmethod
     def from_env(cls, env) -> ObservationLayout:
-        """The layout of a TetherLibration env (wrapped or not)."""
-        cfg = env.unwrapped.config if hasattr(env, "unwrapped") else env.config
+        """The layout of a TetherLibration env (wrapped or not, or its vector env)."""
+        cfg = env_config(env)
         observed = cfg.observed
-        return cls(cfg.n_tethers, cfg.frequency, cfg.max_reel_rate, observed["masses"],
-                   cfg.action_mode, observed["eccentricity"])
+        return cls(n_tethers=cfg.n_tethers, frequency=cfg.frequency,
+                   max_reel_rate=cfg.max_reel_rate, with_params=observed["masses"],
+                   with_eccentricity=observed["eccentricity"], action_mode=cfg.action_mode)
 
     @property
     def switches(self) -> dict[str, bool]:
@@ -82,10 +118,11 @@ class ObservationLayout:
                 "masses": self.with_params}
 
     def require_rate_mode(self, who: str) -> None:
-        """Raise ValueError unless the env takes reel-rate commands as actions."""
-        if self.action_mode != "rate":
-            raise ValueError(f"{who} commands reel rates: make the env with "
-                             f"action_mode='rate' (it has action_mode={self.action_mode!r})")
+        """Raise ValueError unless the env takes reel-rate commands as actions.
+
+        :func:`tether_gym.envs.actions.require_rate_mode` of this env's mode.
+        """
+        require_rate_mode(self.action_mode, who)
 
     @property
     def obs_dim(self) -> int:
@@ -120,6 +157,22 @@ class ObservationLayout:
                               obs[:, sl] if f.per_tether else obs[:, sl.start])
         return ObservedState(**values)
 
+    def state(self, obs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(nu (B,) [rad], state rows (B, 4n) in the STATE layout) of a (B, obs_dim) batch.
+
+        The state as the observation shows it (float32, and noisy under ``obs_noise``):
+        the input of a safety filter that sees what the policy sees
+        (:class:`tether_gym.wrappers.FilterInTheLoop`). nu = arctan2(sin nu, cos nu) lies
+        in (-pi, pi]: the orbit terms depend on nu only through sin and cos, so the
+        wrapped angle predicts the same step.
+        """
+        st = self.split(obs)
+        sl = STATE.slices(self.n_tethers)
+        y = np.empty((st.theta.shape[0], STATE.size(self.n_tethers)))
+        for name in STATE.names:
+            y[:, sl[name]] = getattr(st, name)
+        return np.arctan2(st.sin_nu, st.cos_nu), y
+
     def to_action(self, reel_rate: np.ndarray) -> np.ndarray:
         """Commanded l' [-] -> action in [-1, 1] (float32), clipped (``action_mode="rate"``)."""
         return np.clip(np.asarray(reel_rate) / self.max_reel_rate, -1.0, 1.0).astype(np.float32)
@@ -144,8 +197,8 @@ class ReelRatePolicy:
     """
 
     layout: ObservationLayout
-    ENV_KWARGS = {"action_mode": "rate"}
-    """Env arguments these policies need."""
+    ENV_KWARGS = RATE_ENV_KWARGS
+    """Env arguments these policies need (:data:`RATE_ENV_KWARGS`)."""
 
     def reel_rate(self, obs: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
         """Commanded reel rates l' (B, N-1) [-] for observations (B, obs_dim)."""

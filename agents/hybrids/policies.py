@@ -7,9 +7,15 @@ deterministic=True) -> (actions, state)``, so they run through
 SB3's ``evaluate_policy`` like every other policy. They are ``batch_invariant`` when
 their parts are (each row's action is bitwise what it would be alone).
 
+Each filters its commands through :class:`tether_gym.wrappers.FilterInTheLoop` at the
+state read from the observation (:meth:`ObservationLayout.state`: what the policy
+sees, float32 and noisy under ``obs_noise``), the same filter step as
+:class:`tether_gym.wrappers.SafetyFilterWrapper` and the residual training
+(:mod:`tether_gym_agents.training.residual_env`).
+
 * :class:`FilteredPolicy` passes the wrapped policy's action (a normalised reel-rate
-  command) through :meth:`tether_gym.safety.SafetyFilter.project` at the state read
-  from the observation, and counts the interventions.
+  command) through :meth:`tether_gym.safety.SafetyFilter.project` and counts the
+  interventions.
 * :class:`ResidualPolicy` commands ``clip(a_base + scale * a_residual, -1, 1)``, with
   a_base the base law's action (e.g. the sliding-mode controller) and a_residual a
   trained model's deterministic action; given a filter, it filters the sum.
@@ -22,67 +28,75 @@ from __future__ import annotations
 
 import numpy as np
 
+from tether_gym.envs.actions import INCREMENT, next_command
 from tether_gym.params import check_range
-from tether_gym.physics import STATE
 from tether_gym.safety import FilterResult, SafetyFilter
+from tether_gym.wrappers import FilterInTheLoop
 
-from ..common.obs import ObservationLayout
+from ..common.obs import ObservationLayout, require_predict
+from .residual_spec import check_scale
 
-__all__ = ["FilteredPolicy", "ResidualPolicy", "HandoverPolicy", "state_from_observation"]
-
-
-def state_from_observation(layout: ObservationLayout, obs: np.ndarray):
-    """(nu (B,) [rad], state rows (B, 4n) in the STATE layout) of a (B, obs_dim) batch.
-
-    nu = arctan2(sin nu, cos nu) lies in (-pi, pi]: the orbit terms depend on nu only
-    through sin and cos, so the wrapped angle predicts the same step.
-    """
-    st = layout.split(obs)
-    n = layout.n_tethers
-    y = np.empty((obs.shape[0], STATE.size(n)))
-    sl = STATE.slices(n)
-    for name in STATE.names:
-        y[:, sl[name]] = getattr(st, name)
-    return np.arctan2(st.sin_nu, st.cos_nu), y
+__all__ = ["FilteredPolicy", "ResidualPolicy", "HandoverPolicy"]
 
 
 class _Filtering:
-    """Shared filter step and intervention counters of the hybrid policies."""
+    """The observation layout, the filter in the loop and its counters of a hybrid policy.
+
+    The filter predicts from the state read from the observation
+    (:meth:`ObservationLayout.state`), what the policy itself sees.
+    """
 
     layout: ObservationLayout
-    safety_filter: SafetyFilter | None
+    loop: FilterInTheLoop
 
-    def _setup(self, safety_filter, source, layout: ObservationLayout | None,
-               optional: bool = True) -> None:
-        """Keep the checked filter and layout, and zero the counters.
-
-        The filter may be None when ``optional``; the layout is ``layout``, else
-        ``source.layout``, and must take reel rates.
-        """
-        if not (isinstance(safety_filter, SafetyFilter)
-                or (optional and safety_filter is None)):
-            raise TypeError(f"safety_filter must be a SafetyFilter{' or None' * optional}, "
-                            f"got {type(safety_filter).__name__}")
-        self.safety_filter = safety_filter
+    def _setup(self, safety_filter, source, layout: ObservationLayout | None) -> None:
+        """Keep the layout (``layout``, else ``source.layout``; rate mode) and the filter."""
         self.layout = _layout_of(source, layout)
         self.layout.require_rate_mode(type(self).__name__)
-        if safety_filter is not None and safety_filter.n != self.layout.n_tethers:
-            raise ValueError(f"the filter is for {safety_filter.n} tethers, the policy's env "
-                             f"has {self.layout.n_tethers}")
-        self._init_counts()
+        self.loop = FilterInTheLoop(safety_filter, self.layout.n_tethers)
 
-    def _init_counts(self) -> None:
-        self.steps = 0
+    @property
+    def safety_filter(self) -> SafetyFilter | None:
+        """The filter of every command (None: unfiltered)."""
+        return self.loop.safety_filter
+
+    @property
+    def steps(self) -> int:
         """Filtered actions so far (one per observation)."""
-        self.interventions = 0
+        return self.loop.steps
+
+    @property
+    def interventions(self) -> int:
         """Of those, how many the filter changed."""
-        self.infeasible = 0
+        return self.loop.interventions
+
+    @property
+    def infeasible(self) -> int:
         """Of those, how many had no command meeting every constraint."""
-        self.last_filter_active: np.ndarray | None = None
-        """(B,) bool: whether the filter changed each action of the last call (None
-        without a filter), read by :func:`tether_gym_agents.evaluation.rollout.rollout` for the
-        ``filter_rate`` metric."""
-        self.last_result: FilterResult | None = None
+        return self.loop.infeasible
+
+    @property
+    def filter_rate(self) -> float:
+        """interventions / steps (NaN before the first step)."""
+        return self.loop.filter_rate
+
+    @property
+    def last_result(self) -> FilterResult | None:
+        """The filter's answer of the last call (None without a filter)."""
+        return self.loop.last_result
+
+    @property
+    def last_filter_active(self) -> np.ndarray | None:
+        """(B,) bool: whether the filter changed each action of the last call.
+
+        None without a filter. Read by :func:`tether_gym_agents.evaluation.rollout.rollout`
+        for the ``filter_rate`` metric.
+        """
+        return self.loop.last_active
+
+    def reset_counts(self) -> None:
+        """Set the counters to zero (e.g. between episodes)."""
+        self.loop.reset_counts()
 
     @property
     def batch_invariant(self) -> bool:
@@ -95,26 +109,9 @@ class _Filtering:
     def _parts(self) -> tuple:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def reset_counts(self) -> None:
-        """Set the counters to zero (e.g. between episodes)."""
-        self._init_counts()
-
-    @property
-    def filter_rate(self) -> float:
-        """interventions / steps (NaN before the first step)."""
-        return self.interventions / self.steps if self.steps else float("nan")
-
     def _filter(self, obs: np.ndarray, action: np.ndarray) -> np.ndarray:
-        if self.safety_filter is None:
-            return action
-        nu, y = state_from_observation(self.layout, obs)
-        res = self.safety_filter.project(nu, y, np.asarray(action, dtype=np.float64))
-        self.last_result = res
-        self.steps += int(res.active.shape[0])
-        self.interventions += int(res.active.sum())
-        self.infeasible += int((~res.feasible).sum())
-        self.last_filter_active = res.active.copy()
-        return res.command.astype(np.float32)
+        """The commands (B, n) float32 to send for ``action`` at observations ``obs``."""
+        return self.loop(lambda: self.layout.state(obs), action).astype(np.float32)
 
 
 def _layout_of(policy, layout: ObservationLayout | None) -> ObservationLayout:
@@ -147,10 +144,11 @@ class FilteredPolicy(_Filtering):
 
     def __init__(self, policy, safety_filter: SafetyFilter,
                  layout: ObservationLayout | None = None):
-        if not hasattr(policy, "predict"):
-            raise TypeError(f"policy must have a predict method, got {type(policy).__name__}")
-        self.policy = policy
-        self._setup(safety_filter, policy, layout, optional=False)
+        if not isinstance(safety_filter, SafetyFilter):
+            raise TypeError(f"safety_filter must be a SafetyFilter, got "
+                            f"{type(safety_filter).__name__}")
+        self.policy = require_predict("policy", policy)
+        self._setup(safety_filter, policy, layout)
 
     def _parts(self) -> tuple:
         return (self.policy,)
@@ -166,8 +164,7 @@ class FilteredPolicy(_Filtering):
         batch, single = self.layout.as_batch(observation)
         action, state = self.policy.predict(batch, state=state, episode_start=episode_start,
                                             deterministic=deterministic)
-        action = np.asarray(action, dtype=np.float64).reshape(batch.shape[0], -1)
-        out = self._filter(batch, action)
+        out = self._filter(batch, np.asarray(action, dtype=np.float64).reshape(batch.shape[0], -1))
         return (out[0] if single else out), state
 
     def __repr__(self) -> str:
@@ -195,12 +192,9 @@ class ResidualPolicy(_Filtering):
     def __init__(self, base, residual_model, scale: float,
                  safety_filter: SafetyFilter | None = None,
                  layout: ObservationLayout | None = None):
-        for name, obj in (("base", base), ("residual_model", residual_model)):
-            if not hasattr(obj, "predict"):
-                raise TypeError(f"{name} must have a predict method, got {type(obj).__name__}")
-        self.base = base
-        self.residual_model = residual_model
-        self.scale = check_range("scale", scale, 0.0)
+        self.base = require_predict("base", base)
+        self.residual_model = require_predict("residual_model", residual_model)
+        self.scale = check_scale(scale)
         self._setup(safety_filter, base, layout)
 
     def _parts(self) -> tuple:
@@ -242,11 +236,12 @@ class HandoverPolicy(_Filtering):
     ----------
     learned : TrainedAgent
         A trained agent (:class:`~tether_gym_agents.files.trained.TrainedAgent`) on this
-        env's observation. Trained with ``action_mode="increment"`` (its recorded env
-        arguments say so), its action a becomes the command
-        u = clip(u_obs + increment_gain * a, -1, 1) from the observed command u_obs,
-        the increment env's own update (up to the float32 rounding of u_obs);
-        trained in rate mode, a is the command.
+        env's observation. Its action a becomes the command as the env it was trained
+        in would make it (its recorded ``action_mode`` and ``increment_gain``, the env's
+        defaults where absent), by the env's own update
+        :func:`tether_gym.envs.actions.next_command`: with ``action_mode="increment"``
+        u = clip(u_obs + increment_gain * a, -1, 1) from the observed command u_obs (so
+        up to the float32 rounding of u_obs); in rate mode u = clip(a, -1, 1).
     base : SlidingModeController
         The base law (rate mode).
     safety_filter : SafetyFilter or None
@@ -272,9 +267,7 @@ class HandoverPolicy(_Filtering):
                  layout: ObservationLayout | None = None):
         from ..baselines.smc import SlidingModeController
 
-        if not hasattr(learned, "predict"):
-            raise TypeError(f"learned must have a predict method, got "
-                            f"{type(learned).__name__}")
+        require_predict("learned", learned)
         if not isinstance(base, SlidingModeController):
             raise TypeError(f"base must be a SlidingModeController, got "
                             f"{type(base).__name__}")
@@ -285,7 +278,7 @@ class HandoverPolicy(_Filtering):
                                  low_open=True)
         self.command_bound = check_range("command_bound", command_bound, 0.0, 1.0,
                                          low_open=True)
-        self.increment_gain = _increment_gain(learned)
+        self.incremental, self.increment_gain = _action_of(learned)
         self.last_mode: np.ndarray | None = None
 
     def _parts(self) -> tuple:
@@ -308,10 +301,8 @@ class HandoverPolicy(_Filtering):
             rows = batch[~mode]
             a, _ = self.learned.predict(rows.astype(np.float32), deterministic=True)
             a = np.asarray(a, dtype=np.float64).reshape(-1, action.shape[1])
-            if self.increment_gain is not None:
-                u = self.layout.split(rows).command.astype(np.float64)
-                a = u + self.increment_gain * a
-            action[~mode] = np.clip(a, -1.0, 1.0)
+            action[~mode] = next_command(self.layout.split(rows).command, a,
+                                         self.incremental, self.increment_gain)
         self.last_mode = mode.copy()
         out = self._filter(batch, action).astype(np.float32)
         return (out[0] if single else out), mode.astype(np.float64)
@@ -322,8 +313,8 @@ class HandoverPolicy(_Filtering):
                 f"filtered={self.safety_filter is not None})")
 
 
-def _increment_gain(learned) -> float | None:
-    """The increment gain of a policy trained with ``action_mode="increment"``, else None.
+def _action_of(learned) -> tuple[bool, float]:
+    """(whether ``learned`` was trained with ``action_mode="increment"``, its gain [-]).
 
     Read from the recorded env arguments (``learned.env_kwargs``), the env's defaults
     where absent; a policy without recorded arguments is taken to command rates.
@@ -331,9 +322,8 @@ def _increment_gain(learned) -> float | None:
     from tether_gym.envs.config import Action
 
     kwargs = getattr(learned, "env_kwargs", None)
-    if kwargs is None:
-        return None
     default = Action()
-    if kwargs.get("action_mode", default.mode) != "increment":
-        return None
-    return float(kwargs.get("increment_gain", default.increment_gain))
+    if kwargs is None:
+        return False, default.increment_gain
+    return (kwargs.get("action_mode", default.mode) == INCREMENT,
+            float(kwargs.get("increment_gain", default.increment_gain)))

@@ -10,16 +10,32 @@ trains the hybrid it describes and :mod:`tether_gym_agents.evaluation.benchmark`
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
 from ..common.jsonio import checked_mapping
 
-__all__ = ["BaseLaw", "ResidualSpec", "DEFAULT_SCALE"]
+__all__ = ["BaseLaw", "ResidualSpec", "DEFAULT_SCALE", "check_scale"]
 
 DEFAULT_SCALE = 0.2
 """Default weight of the residual [-] (see ``agents/configs/ppo_residual.yml``)."""
+
+
+def check_scale(value: Any, name: str = "scale") -> float:
+    """``float(value)`` after checking it is a weight of the residual: finite and >= 0.
+
+    Raises
+    ------
+    ValueError
+        For a bool, a non-number, NaN, inf or a negative number; the message names
+        ``name`` and the value.
+    """
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+            or not math.isfinite(value) or value < 0:
+        raise ValueError(f"{name} {value!r} must be a finite number >= 0")
+    return float(value)
 
 
 class BaseLaw(Enum):
@@ -63,14 +79,11 @@ class ResidualSpec:
         base = data.get("base", cls.base.value)
         if base not in valid_bases:
             raise ValueError(f"{what}: base {base!r} is not one of {valid_bases}")
-        scale = data.get("scale", cls.scale)
-        if isinstance(scale, bool) or not isinstance(scale, (int, float)) \
-                or not math.isfinite(scale) or scale < 0:
-            raise ValueError(f"{what}: scale {scale!r} must be a finite number >= 0")
+        scale = check_scale(data.get("scale", cls.scale), f"{what}: scale")
         use_filter = data.get("filter", cls.filter)
         if not isinstance(use_filter, bool):
             raise ValueError(f"{what}: filter {use_filter!r} must be true or false")
-        return cls(BaseLaw(base), float(scale), use_filter)
+        return cls(BaseLaw(base), scale, use_filter)
 
     def to_dict(self) -> dict:
         """The JSON/YAML form: ``{"base": "smc", "scale": 0.2, "filter": true}``."""

@@ -13,6 +13,23 @@ inside a stable-baselines3 vector env, so PPO or SAC learn a_rl on it unchanged;
 evaluation :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` computes the same sum
 around the trained agent.
 
+**The filter's input is the observation**, at training as at evaluation: both filter
+through :class:`tether_gym.wrappers.FilterInTheLoop` at the state read from the
+observation (:meth:`~tether_gym_agents.common.obs.ObservationLayout.state`: float32,
+with the env's ``obs_noise``), so the residual learns behind the filter it is
+evaluated behind. Earlier versions of this module gave the filter the true state from
+the env's ``info`` instead, and the shipped ``smc_residual`` seeds were trained so
+(their evaluation is the same as ever). The difference, measured on the training distribution of
+``ppo_residual.yml`` (``obs_noise`` 1e-3; 8 envs x 1600 steps = 12 800 states,
+stepping with the true-state filter) by projecting the same desired command from both
+inputs: with shipped seed 0 as the residual, the filter intervened on 0.69 % of the
+states (true state) and 0.70 % (observation), the two inputs disagreed on whether to
+intervene on 0.10 % and gave different commands on 0.74 % (largest |du| per state:
+median 1.5e-3, 90th percentile 0.02, at most 1 where one side found no feasible
+command); with an untrained residual (std e^-3.5) 2.0 % interventions, 0.33 %
+disagreement, 1.9 % different commands (median 1.5e-3; the 0.22 % of states where one
+side finds no feasible command differ by up to 1.7).
+
 :class:`~tether_gym_agents.hybrids.residual_spec.ResidualSpec` (re-exported here) is the
 plain-data description of a hybrid: the ``residual`` key of a training config, the
 ``"hybrid"`` entry of ``agent.json``.
@@ -20,39 +37,25 @@ plain-data description of a hybrid: the ``residual`` key of a training config, t
 
 from __future__ import annotations
 
-import math
 from types import SimpleNamespace
 
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
-from tether_gym.physics import STATE
-from tether_gym.safety import FilterResult, SafetyFilter
-from tether_gym.wrappers import state_of
+from tether_gym.safety import SafetyFilter, env_config
+from tether_gym.wrappers import INFO_KEYS, FilterInTheLoop
 
 from ..baselines.smc import SlidingModeController
-from ..common.obs import ObservationLayout
-from ..hybrids.policies import state_from_observation
-from ..hybrids.residual_spec import DEFAULT_SCALE, BaseLaw, ResidualSpec
+from ..common.obs import ObservationLayout, require_predict
+from ..hybrids.residual_spec import DEFAULT_SCALE, BaseLaw, ResidualSpec, check_scale
 
 __all__ = ["BaseLaw", "ResidualSpec", "ResidualVecEnv", "DEFAULT_SCALE", "INFO_KEYS"]
-
-INFO_KEYS = ("filter_active", "filter_correction", "filter_feasible")
-"""Entries :class:`ResidualVecEnv` adds to every step's ``infos[i]`` (as
-:data:`tether_gym.wrappers.INFO_KEYS`; False, 0.0, True without a filter)."""
-_STATE_KEYS = ("nu", *STATE.names)
 
 
 def _config_view(venv: VecEnv) -> SimpleNamespace:
     """An object with the TetherLibration ``config`` and nominal ``model`` of ``venv``."""
-    try:
-        cfg = venv.get_attr("config", indices=[0])[0]
-    except AttributeError:
-        cfg = None
-    if cfg is None or not hasattr(cfg, "model") or not hasattr(cfg, "param_rows"):
-        raise TypeError(f"venv must be a vector env of tether_gym/TetherLibration-v1 (e.g. "
-                        f"make_sb3_vec_env), got {type(venv).__name__} without its config")
+    cfg = env_config(venv)
     return SimpleNamespace(config=cfg, model=cfg.model)
 
 
@@ -64,7 +67,8 @@ class ResidualVecEnv(VecEnvWrapper):
     observation, which SB3 returns in place of the terminal one), ``scale * action`` is
     added, the sum is clipped to [-1, 1], filtered when a filter is given, cast to
     float32 (as :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` returns it) and sent
-    to the wrapped env. ``infos[i]`` gets :data:`INFO_KEYS` of that step.
+    to the wrapped env. ``infos[i]`` gets :data:`INFO_KEYS` of that step (the
+    declaration of :mod:`tether_gym.wrappers`).
 
     Parameters
     ----------
@@ -77,11 +81,10 @@ class ResidualVecEnv(VecEnvWrapper):
     scale : float
         Weight of the residual [-], finite and >= 0.
     safety_filter : SafetyFilter or None
-        Filter of the summed command (None: unfiltered). It is given the true state of
-        each sub-env from the env's ``info`` (reset info after a reset), as
-        :class:`tether_gym.wrappers.SafetyFilterWrapper` does, or the state read from
-        the observation (:func:`~tether_gym_agents.hybrids.policies.state_from_observation`)
-        for a sub-env whose info lacks it.
+        Filter of the summed command (None: unfiltered). It predicts from the state read
+        from each sub-env's observation (:meth:`ObservationLayout.state`), as the
+        evaluated :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` does
+        (module docstring).
 
     Raises
     ------
@@ -95,35 +98,34 @@ class ResidualVecEnv(VecEnvWrapper):
     Notes
     -----
     Counters over the wrapper's life: ``filter_steps`` (filtered commands) and
-    ``filter_interventions`` (of those, the ones the filter changed).
+    ``filter_interventions`` (of those, the ones the filter changed); ``loop`` is the
+    :class:`~tether_gym.wrappers.FilterInTheLoop` that keeps them.
     """
 
     def __init__(self, venv: VecEnv, base, scale: float,
                  safety_filter: SafetyFilter | None = None):
-        view = _config_view(venv)
-        self.layout = ObservationLayout.from_env(view)
+        self.layout = ObservationLayout.from_env(venv)
         self.layout.require_rate_mode(type(self).__name__)
-        if not hasattr(base, "predict"):
-            raise TypeError(f"base must have a predict method, got {type(base).__name__}")
-        if isinstance(scale, bool) or not isinstance(scale, (int, float, np.floating)) \
-                or not math.isfinite(scale) or scale < 0:
-            raise ValueError(f"scale={scale!r} must be a finite number >= 0")
-        if safety_filter is not None:
-            if not isinstance(safety_filter, SafetyFilter):
-                raise TypeError(f"safety_filter must be a SafetyFilter or None, got "
-                                f"{type(safety_filter).__name__}")
-            if safety_filter.n != self.layout.n_tethers:
-                raise ValueError(f"the filter is for {safety_filter.n} tethers, the env has "
-                                 f"{self.layout.n_tethers}")
+        self.base = require_predict("base", base)
+        self.scale = check_scale(scale)
+        self.loop = FilterInTheLoop(safety_filter, self.layout.n_tethers)
         super().__init__(venv)
-        self.base = base
-        self.scale = float(scale)
-        self.safety_filter = safety_filter
-        self.filter_steps = 0
-        self.filter_interventions = 0
         self._obs: np.ndarray | None = None
-        self._infos: list[dict] = [{} for _ in range(self.num_envs)]
-        self._result: FilterResult | None = None
+
+    @property
+    def safety_filter(self) -> SafetyFilter | None:
+        """The filter of the summed command (None: unfiltered)."""
+        return self.loop.safety_filter
+
+    @property
+    def filter_steps(self) -> int:
+        """Filtered commands so far."""
+        return self.loop.steps
+
+    @property
+    def filter_interventions(self) -> int:
+        """Of those, the ones the filter changed."""
+        return self.loop.interventions
 
     @classmethod
     def from_spec(cls, venv: VecEnv, spec: ResidualSpec) -> ResidualVecEnv:
@@ -142,11 +144,10 @@ class ResidualVecEnv(VecEnvWrapper):
 
     # ------------------------------------------------------------------ #
     def reset(self) -> VecEnvObs:
-        """Reset every sub-env; remember the observations and reset infos."""
+        """Reset every sub-env; remember the observations and pass the reset infos on."""
         obs = self.venv.reset()
         self._obs = np.array(obs, copy=True)
-        self._infos = [dict(i) for i in self._reset_infos()]
-        self.reset_infos = list(self._reset_infos())
+        self.reset_infos = self._reset_infos()
         return obs
 
     def _reset_infos(self) -> list[dict]:
@@ -168,41 +169,20 @@ class ResidualVecEnv(VecEnvWrapper):
         base = np.asarray(base, dtype=np.float64).reshape(self.num_envs, n)
         return np.clip(base + self.scale * a.reshape(self.num_envs, n), -1.0, 1.0)
 
-    def _states(self) -> tuple[np.ndarray, np.ndarray]:
-        """(nu (B,), state rows (B, 4n)) of the sub-envs now: info where it has them."""
-        assert self._obs is not None
-        nu, y = state_from_observation(self.layout, np.asarray(self._obs))
-        for i, info in enumerate(self._infos):
-            if all(k in info for k in _STATE_KEYS):
-                nu[i], y[i] = state_of(info)
-        return nu, y
-
     def step_async(self, actions: np.ndarray) -> None:
         """Send the hybrid's commands for the residual ``actions`` to the wrapped env."""
         cmd = self.commands(actions)
-        self._result = None
-        if self.safety_filter is not None:
-            nu, y = self._states()
-            res = self.safety_filter.project(nu, y, cmd)
-            self._result = res
-            cmd = res.command
-            self.filter_steps += int(res.active.shape[0])
-            self.filter_interventions += int(res.active.sum())
+        obs = self._obs
+        assert obs is not None  # commands() checked it
+        cmd = self.loop(lambda: self.layout.state(obs), cmd)
         self.venv.step_async(cmd.astype(np.float32))
 
     def step_wait(self) -> VecEnvStepReturn:
         """Step; the returned observations become the base law's next input."""
         obs, rewards, dones, infos = self.venv.step_wait()
-        res = self._result
         resets = self._reset_infos()
         for i, info in enumerate(infos):
-            if res is None:
-                info.update(filter_active=False, filter_correction=0.0, filter_feasible=True)
-            else:
-                info.update(filter_active=bool(res.active[i]),
-                            filter_correction=float(res.correction[i]),
-                            filter_feasible=bool(res.feasible[i]))
-            self._infos[i] = resets[i] if dones[i] else info
+            info.update(self.loop.info(i))
             if dones[i]:
                 self.reset_infos[i] = resets[i]
         self._obs = np.array(obs, copy=True)

@@ -28,6 +28,7 @@ from ..physics.state import P, S, mass_fraction
 from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
 from ..tasks.termination import KEEP_PREVIOUS, failure_code
+from .actions import next_command
 from .layout import I, O
 from .workers import DONE, HI, LO, call_address, next_job
 
@@ -225,9 +226,10 @@ def first_bad_action(index, lo, hi, action, n):
 def step_rows(index, action, rows, cfg, work, reset, relay):
     """One control step of the rows listed in ``index`` (int64), in place; others untouched.
 
-    ``action`` (B, n) holds the actions, clipped to [-1, 1]; they set the normalised
-    command u (``rows.command``): u = action, or u <- clip(u + gain * action, -1, 1)
-    with ``cfg.incremental``; l'_cmd = u * max_reel_rate. Returns -1, or, before
+    ``action`` (B, n) holds the actions; they set the normalised command u
+    (``rows.command``) by :func:`~tether_gym.envs.actions.next_command`: u = clip(action,
+    -1, 1), or u <- clip(u + gain * clip(action, -1, 1), -1, 1) with ``cfg.incremental``;
+    l'_cmd = u * max_reel_rate. Returns -1, or, before
     anything is stepped, the first listed row whose action is NaN or inf (then no row
     is touched). With ``reset`` True the listed rows, whose ``nu``, ``y``, ``par``,
     ``noise`` and ``nu_end`` were just set, are not stepped: they get dy/dnu and T^ at
@@ -280,9 +282,8 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
                 for k in range(m):
                     work.previous[k] = yb[k]
                 for j in range(n):
-                    a = min(max(action[b, j], -1.0), 1.0)
-                    if cfg.incremental:
-                        a = min(max(rows.command[b, j] + cfg.increment_gain * a, -1.0), 1.0)
+                    a = next_command(rows.command[b, j], action[b, j], cfg.incremental,
+                                     cfg.increment_gain)
                     rows.command[b, j] = a
                     work.command[j] = a * cfg.max_reel_rate
                 inputs = kernels.StepInputs(work.command, rows.disturbance[b])

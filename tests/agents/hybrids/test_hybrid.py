@@ -19,7 +19,6 @@ from tether_gym_agents.hybrids.policies import (
     FilteredPolicy,
     HandoverPolicy,
     ResidualPolicy,
-    state_from_observation,
 )
 
 SHORT = {"orbits_per_episode": 0.1, "action_mode": "rate"}
@@ -46,9 +45,9 @@ class Constant:
                 None)
 
 
-def test_state_from_observation_matches_the_info(env):
+def test_the_observed_state_matches_the_info(env):
     obs, info = env.reset(seed=1)
-    nu, y = state_from_observation(ObservationLayout.from_env(env), obs[None])
+    nu, y = ObservationLayout.from_env(env).state(obs[None])
     np.testing.assert_allclose(nu[0], info["nu"], atol=1e-6)
     np.testing.assert_allclose(y[0], np.concatenate(
         [info["theta"], info["dtheta"], info["length"], info["dlength"]]), atol=1e-6)

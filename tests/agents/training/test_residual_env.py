@@ -5,6 +5,7 @@ evaluation."""
 from __future__ import annotations
 
 import json
+import re
 
 import gymnasium as gym
 import numpy as np
@@ -136,19 +137,37 @@ def test_filter_acts_and_reports_in_infos():
     hybrid.close()
 
 
-def test_the_filter_reads_the_true_state_from_the_infos():
-    """Under observation noise the filter gets the env's state, not the noisy observation."""
-    hybrid = ResidualVecEnv.from_spec(_venv(obs_noise=0.01), ResidualSpec(scale=0.2))
-    hybrid.reset()
-    for _ in range(15):  # across an auto-reset
-        _, _, dones, infos = hybrid.step(np.zeros((N_ENVS, 2), np.float32))
-        nu, y = hybrid._states()
-        for i, info in enumerate(infos):
-            src = hybrid.venv.reset_infos[i] if dones[i] else info
-            assert nu[i] == src["nu"]
-            np.testing.assert_array_equal(y[i], np.concatenate(
-                [src[k] for k in ("theta", "dtheta", "length", "dlength")]))
+def test_the_filter_sees_the_observation_as_at_evaluation():
+    """Under observation noise the filter predicts from the observed state, as the
+    evaluated ResidualPolicy does: the same commands for the same observations and
+    residuals, across auto-resets."""
+    from tether_gym_agents.hybrids.policies import ResidualPolicy
+
+    kwargs = {"initial_lengths": (0.1, 0.9), "obs_noise": 0.01}
+    hybrid = ResidualVecEnv.from_spec(_venv(**kwargs), ResidualSpec(scale=1.0))
+    obs = hybrid.reset()
+    rng = np.random.default_rng(3)
+    ends = 0
+    for _ in range(30):  # reel tether 1 in: the filter steps in
+        a = np.clip(rng.normal([-1.0, 0.0], 0.3, (N_ENVS, 2)), -1, 1).astype(np.float32)
+        policy = ResidualPolicy(hybrid.base, Constant(a), 1.0, hybrid.safety_filter)
+        expected, _ = policy.predict(obs)
+        obs, _, dones, infos = hybrid.step(a)
+        applied = np.array([info["command"] for info in infos])
+        np.testing.assert_array_equal(applied, expected)
+        ends += int(dones.sum())
+    assert ends >= N_ENVS and hybrid.filter_interventions > 0
     hybrid.close()
+
+
+class Constant:
+    """A residual model with fixed actions (one row per sub-env)."""
+
+    def __init__(self, actions):
+        self.actions = actions
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        return self.actions, None
 
 
 def test_validation():
@@ -166,6 +185,20 @@ def test_validation():
 
     with pytest.raises(TypeError, match="TetherLibration"):
         ResidualVecEnv(make_vec_env("Pendulum-v1", n_envs=1), _smc(), 0.2)
+    venv.close()
+
+
+@pytest.mark.parametrize("bad", [-0.1, True, float("nan"), "0.2"])
+def test_the_scale_is_checked_alike_everywhere(bad):
+    from tether_gym_agents.hybrids.policies import ResidualPolicy
+
+    venv = _venv()
+    message = f"scale {re.escape(repr(bad))} must be a finite number >= 0"
+    for make in (lambda: ResidualVecEnv(venv, _smc(), bad),
+                 lambda: ResidualPolicy(_smc(), _smc(), bad),
+                 lambda: ResidualSpec.from_dict({"scale": bad})):
+        with pytest.raises(ValueError, match=message):
+            make()
     venv.close()
 
 
