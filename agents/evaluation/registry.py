@@ -41,7 +41,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from ..baselines.open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
-from ..common.obs import ReelRatePolicy
+from ..common.obs import RATE_ENV_KWARGS
 from ..files import TrainedAgent, hybrid_of, pretrained_agents, seed_runs
 from . import nominal
 from .scenarios import Scenario
@@ -86,7 +86,7 @@ class PolicyKind(Enum):
 
 def _rate_mode() -> dict:
     """Env arguments of the policies that command reel rates (baselines, hybrids)."""
-    return dict(ReelRatePolicy.ENV_KWARGS)
+    return dict(RATE_ENV_KWARGS)
 
 
 # --------------------------------------------------------------------------- #
