@@ -68,7 +68,7 @@ from .config import ConfigError
 from .run import train
 from .settings import TrainOptions, TrainSettings, resolve_settings
 
-__all__ = ["RAY_PIP", "RunState", "SeedJob", "SeedResult", "run_fanout", "run_jobs",
+__all__ = ["RAY_PIP", "RunState", "SeedStatus", "SeedJob", "SeedResult", "run_fanout", "run_jobs",
            "init_ray", "require_ray", "run_state", "train_seed"]
 
 RAY_PIP = 'pip install "tether_gym[ray]"'
@@ -87,6 +87,14 @@ class RunState(Enum):
     NEW = "new"  # nothing to continue from: train from scratch
     PARTIAL = "partial"  # a checkpoint or final model below the target: resume
     DONE = "done"  # train_info.json reaches the target: skip
+
+
+class SeedStatus(Enum):
+    """What a seed job ended as."""
+
+    TRAINED = "trained"
+    SKIPPED = "skipped"  # the run folder had reached its target already
+    FAILED = "failed"
 
 
 @dataclass(frozen=True)
@@ -123,8 +131,7 @@ class SeedResult:
     Attributes
     ----------
     label, run_dir : str
-    status : str
-        ``"trained"``, ``"skipped"`` (already finished) or ``"failed"``.
+    status : SeedStatus
     steps : int
         Env steps the run folder holds [-].
     wall_s : float
@@ -139,7 +146,7 @@ class SeedResult:
 
     label: str
     run_dir: str
-    status: str
+    status: SeedStatus
     steps: int
     wall_s: float = 0.0
     run_wall_s: float | None = None
@@ -271,22 +278,22 @@ def train_seed(job: SeedJob, threads: int = 1) -> SeedResult:
     t0 = time.perf_counter()
     job.run_dir.mkdir(parents=True, exist_ok=True)
     state, steps = run_state(job.run_dir, job.target)
-    status = "skipped" if state is RunState.DONE else "trained"
+    status = SeedStatus.SKIPPED if state is RunState.DONE else SeedStatus.TRAINED
     calls, message = 0, ""
     with open(job.run_dir / TRAIN_LOG_FILE, "a", buffering=1) as log, \
             contextlib.redirect_stdout(log), contextlib.redirect_stderr(log):
         while state is not RunState.DONE:
             if calls == MAX_CALLS:
-                status = "failed"
+                status = SeedStatus.FAILED
                 message = f"still at step {steps} of {job.target} after {MAX_CALLS} calls"
                 break
             message = _train_call(job, state, steps)
             calls += 1
             if message:
-                status = "failed"
+                status = SeedStatus.FAILED
                 break
             state, steps = run_state(job.run_dir, job.target)
-        print(f"==== {job.label}: {status} at step {steps}", flush=True)
+        print(f"==== {job.label}: {status.value} at step {steps}", flush=True)
     return SeedResult(job.label, str(job.run_dir), status, steps,
                       round(time.perf_counter() - t0, 1), _run_wall(job.run_dir), calls, message)
 
@@ -297,10 +304,10 @@ def _run_wall(run_dir: Path) -> float | None:
 
 
 def _summary_line(res: SeedResult) -> str:
-    if res.status == "failed":
+    if res.status is SeedStatus.FAILED:
         return (f"{res.label}: FAILED after {res.wall_s} s: {res.message} "
                 f"(log {res.run_dir}/{TRAIN_LOG_FILE})")
-    verb = "already finished" if res.status == "skipped" else f"trained in {res.wall_s} s"
+    verb = "already finished" if res.status is SeedStatus.SKIPPED else f"trained in {res.wall_s} s"
     return (f"{res.label}: {verb}, step {res.steps}, run wall time {res.run_wall_s} s "
             f"({res.run_dir})")
 
@@ -317,7 +324,7 @@ def run_jobs(jobs: list[SeedJob], *, address: str | None = None, threads: int = 
     for job in jobs:
         state, steps = run_state(job.run_dir, job.target)
         if state is RunState.DONE:
-            results.append(SeedResult(job.label, str(job.run_dir), "skipped", steps,
+            results.append(SeedResult(job.label, str(job.run_dir), SeedStatus.SKIPPED, steps,
                                       run_wall_s=_run_wall(job.run_dir)))
         else:
             todo.append(job)
@@ -360,7 +367,7 @@ def _run_on_ray(jobs: list[SeedJob], address: str | None, threads: int):
             try:
                 res = ray.get(done[0])
             except Exception as exc:  # a worker died (killed, out of memory)
-                res = SeedResult(job.label, str(job.run_dir), "failed",
+                res = SeedResult(job.label, str(job.run_dir), SeedStatus.FAILED,
                                  run_state(job.run_dir, job.target)[1],
                                  message=f"{type(exc).__name__}: {str(exc).splitlines()[0]}")
             yield res
@@ -397,7 +404,7 @@ def run_fanout(options: TrainOptions) -> int:
     except KeyboardInterrupt:
         print(INTERRUPTED, file=sys.stderr)
         return 130
-    failed = [r for r in results if r.status == "failed"]
+    failed = [r for r in results if r.status is SeedStatus.FAILED]
     print(f"{len(results) - len(failed)}/{len(results)} seeds complete in {out} "
           f"({time.perf_counter() - t0:.0f} s)")
     plot = plot_seed_learning_curves(out)

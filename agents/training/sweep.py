@@ -72,7 +72,15 @@ from ..files.run_folder import (
     write_text_atomic,
 )
 from .config import ConfigError, load_hyperparams
-from .fanout import INTERRUPTED, SeedJob, init_ray, require_ray, run_jobs, train_seed
+from .fanout import (
+    INTERRUPTED,
+    SeedJob,
+    SeedStatus,
+    init_ray,
+    require_ray,
+    run_jobs,
+    train_seed,
+)
 from .settings import TrainOptions, TrainSettings, resolve_settings
 
 __all__ = ["Search", "SweepSpec", "load_sweep", "expand_trials", "apply_overrides",
@@ -392,10 +400,50 @@ def run_sweep(options: TrainOptions) -> int:
          "returns": [final_eval_return(seed_dir(trial.out, s)) for s in seeds]}
         for trial, t in zip(settings, trials, strict=True)])
     print(write_table(ranked, out, list(spec.params)))
-    failed = [r for r in results if r.status == "failed"]
+    failed = [r for r in results if r.status is SeedStatus.FAILED]
     if failed:
         print(f"{len(failed)} run(s) failed; rerun the same command to resume them")
     return 1 if failed else 0
+
+
+def _tune_space(spec: SweepSpec, tune) -> tuple[dict[str, str], dict]:
+    """Tune's names of the swept keys (``p0``, ``p1``, ...) and its search space."""
+    names = {f"p{i}": key for i, key in enumerate(spec.params)}  # Tune splits keys at "/"
+    space = {}
+    for name, key in names.items():
+        kind, arg = spec.params[key]
+        if kind == "values":
+            space[name] = tune.choice([json.dumps(v) for v in arg])  # lists as JSON strings
+        elif kind == "uniform":
+            space[name] = tune.uniform(*arg)
+        elif kind == "loguniform":
+            space[name] = tune.loguniform(*arg)
+        else:
+            space[name] = tune.randint(arg[0], arg[1] + 1)
+    return names, space
+
+
+def _overrides_of(spec: SweepSpec, names: dict[str, str], config: dict) -> dict:
+    """The dotted-key overrides of a Tune trial's config."""
+    return {names[n]: json.loads(v) if spec.params[names[n]][0] == "values" else v
+            for n, v in config.items()}
+
+
+def _optuna_rows(results, spec: SweepSpec, names: dict[str, str], target: int) -> list[dict]:
+    """The trials of a finished Tune run, as :func:`rank_trials` takes them."""
+    trials = []
+    for result in results:
+        if result.config is None:
+            continue
+        metrics = result.metrics or {}
+        name = f"trial_{metrics.get('trial_id', '?')}"
+        stopped = metrics.get("steps", target) < target
+        if stopped:
+            name += f" (stopped by ASHA at {metrics['steps']} steps)"
+        trials.append({"name": name, "params": _overrides_of(spec, names, result.config),
+                       "returns": metrics.get("returns") or [float("nan")],
+                       "stopped": stopped})
+    return trials
 
 
 def _run_optuna(options, spec, base, target, seeds, out) -> int:
@@ -410,29 +458,13 @@ def _run_optuna(options, spec, base, target, seeds, out) -> int:
     from ray.tune.schedulers import ASHAScheduler
     from ray.tune.search.optuna import OptunaSearch
 
-    names = {f"p{i}": key for i, key in enumerate(spec.params)}  # Tune splits keys at "/"
-    space = {}
-    for name, key in names.items():
-        kind, arg = spec.params[key]
-        if kind == "values":
-            space[name] = tune.choice([json.dumps(v) for v in arg])  # lists as JSON strings
-        elif kind == "uniform":
-            space[name] = tune.uniform(*arg)
-        elif kind == "loguniform":
-            space[name] = tune.loguniform(*arg)
-        else:
-            space[name] = tune.randint(arg[0], arg[1] + 1)
-
-    def overrides_of(config):
-        return {names[n]: json.loads(v) if spec.params[names[n]][0] == "values" else v
-                for n, v in config.items()}
-
+    names, space = _tune_space(spec, tune)
     chunks = spec.asha["chunks"]
 
     def trial_fn(config):
-        overrides = overrides_of(config)
         trial_dir = out / f"trial_{tune.get_context().get_trial_id()}"
-        trial = _trial_settings(options, base, overrides, trial_dir, target)
+        trial = _trial_settings(options, base, _overrides_of(spec, names, config), trial_dir,
+                                target)
         for chunk in range(1, chunks + 1):
             steps = max(target * chunk // chunks, 1)
             returns = []
@@ -441,16 +473,15 @@ def _run_optuna(options, spec, base, target, seeds, out) -> int:
                               trial.for_seed(s, seed_dir(trial_dir, s), timesteps=steps))
                 res = train_seed(job, options.torch_threads)
                 returns.append(final_eval_return(job.run_dir)
-                               if res.status != "failed" else float("nan"))
+                               if res.status is not SeedStatus.FAILED else float("nan"))
             median = statistics.median(returns)
             tune.report({"median_return": -1e30 if math.isnan(median) else median,
                          "returns": returns, "steps": steps})
 
     started = init_ray(options.ray_address)
     try:
-        trainable = tune.with_resources(trial_fn, {"cpu": options.torch_threads})
         tuner = tune.Tuner(
-            trainable, param_space=space,
+            tune.with_resources(trial_fn, {"cpu": options.torch_threads}), param_space=space,
             tune_config=tune.TuneConfig(
                 metric="median_return", mode="max", num_samples=spec.num_samples,
                 search_alg=OptunaSearch(seed=spec.sample_seed),
@@ -464,23 +495,8 @@ def _run_optuna(options, spec, base, target, seeds, out) -> int:
             import ray
 
             ray.shutdown()
-    trials = []
     results = [grid[i] for i in range(len(grid))]
-    for result in results:
-        if result.config is None:
-            continue
-        overrides = overrides_of(result.config)
-        metrics = result.metrics or {}
-        returns = metrics.get("returns") or [float("nan")]
-        name = f"trial_{metrics.get('trial_id', '?')}"
-        stopped = metrics.get("steps", target) < target
-        if stopped:
-            name += f" (stopped by ASHA at {metrics['steps']} steps)"
-        trials.append({"name": name, "params": overrides, "returns": returns,
-                       "stopped": stopped})
-    ranked = rank_trials(trials)
-    print(write_table(ranked, out, list(spec.params)))
+    trials = _optuna_rows(results, spec, names, target)
+    print(write_table(rank_trials(trials), out, list(spec.params)))
     print(f"optuna sweep of {len(trials)} trial(s) in {time.perf_counter() - t0:.0f} s")
-    errors = sum(1 for r in results if r.error)
-    return 1 if errors else 0
-
+    return 1 if any(r.error for r in results) else 0
