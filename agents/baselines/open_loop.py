@@ -31,7 +31,7 @@ from tether_gym.tasks.reference import (
     zero_state_reel_rate,
 )
 
-from ..common.obs import ObservationLayout, ReelRatePolicy
+from ..common.obs import RATE_ENV_KWARGS, ObservationLayout, ReelRatePolicy
 
 __all__ = ["AngleSource", "ZeroStateReel", "PeriodicReel", "RandomPolicy"]
 
@@ -196,7 +196,7 @@ class RandomPolicy:
         Seed of the policy's own generator (independent of the env's).
     """
 
-    ENV_KWARGS = ReelRatePolicy.ENV_KWARGS
+    ENV_KWARGS = RATE_ENV_KWARGS
     """Env arguments of the benchmark's random baseline (uniform reel-rate commands)."""
 
     def __init__(self, env, seed: int | None = None):

@@ -1,5 +1,106 @@
-"""``python train.py``: train a PPO or SAC agent, one seed or a fan-out of seeds."""
+"""Train PPO or SAC on a tether_gym environment: the command line of ``train.py``.
 
-from ..training.train import main
+``main`` parses the command line into a ``TrainOptions``, resolves it once into a
+``TrainSettings`` (both in :mod:`tether_gym_agents.training.settings`) and trains
+(:func:`tether_gym_agents.training.run.train`), or hands the options to the fan-out of
+seeds (:mod:`tether_gym_agents.training.fanout`) or the sweep
+(:mod:`tether_gym_agents.training.sweep`). Errors are ``ConfigError`` exceptions
+(:mod:`tether_gym_agents.training.config`); ``main`` prints their message as
+``train.py: error: <message>`` and returns 2.
 
-__all__ = ["main"]
+A run folder (``--out``) keeps everything needed to reproduce, evaluate and resume
+the run:
+
+* ``config.yml`` (resolved hyperparameters, algorithm, env id and the resolved env
+  kwargs), ``args.yml`` (parsed arguments), ``command.txt`` (every command line);
+* ``agent.json`` + ``policy.safetensors``: the best agent (the evaluations' best) in the
+  safe format of :mod:`tether_gym_agents.files.safe_format`, which is what ``evaluate.py
+  RUN`` loads; ``final_agent/``: the agent at the last step, in the same format;
+* ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
+  ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
+* ``train_info.json`` (steps, wall time including interrupted parts, seed; rewritten
+  every ``PROGRESS_EVERY_S`` seconds while training);
+* for ``--resume`` only, stable-baselines3's own pickled files, which this package
+  writes and reads back itself: ``final_model.zip``, ``best_model.zip``,
+  ``vecnormalize.pkl``, ``final_replay_buffer.pkl`` (SAC) and ``checkpoints/``.
+
+The layout is owned by :mod:`tether_gym_agents.files.run_folder`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import tether_gym
+
+from ..training.config import ConfigError
+from ..training.fanout import run_fanout
+from ..training.run import train
+from ..training.settings import SEED_MAX, TrainOptions, resolve_settings
+from ..training.sweep import run_sweep
+
+__all__ = ["main", "build_parser"]
+
+
+def main(argv=None) -> int:
+    """Command line of ``train.py``; returns the exit code."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    try:
+        options = TrainOptions.from_namespace(args)
+        if options.sweep is not None:
+            return run_sweep(options)  # Ray is imported there only
+        if options.seeds is not None:
+            return run_fanout(options)
+        train(resolve_settings(options, command=tuple(argv)))
+        return 0
+    except ConfigError as exc:
+        print(f"train.py: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``train.py`` (its options are the fields of TrainOptions)."""
+    p = argparse.ArgumentParser(prog="train.py", description="Train PPO or SAC on tether_gym.")
+    p.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
+    p.add_argument("--env-id", default=tether_gym.ENV_ID)
+    p.add_argument("--env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
+                   help="env arguments as Python literals, e.g. eccentricity=0.3 "
+                        "masses=(1,2); they win over the config's env_kwargs (a fixed value "
+                        "clears the config's random range of the same quantity)")
+    p.add_argument("--n-envs", type=int, default=None,
+                   help="parallel envs, >= 1 (default: config)")
+    p.add_argument("--timesteps", type=int, default=None,
+                   help="env steps to train in this call, >= 1 (default: config n_timesteps)")
+    p.add_argument("--seed", type=int, default=0, help=f"seed in [0, {SEED_MAX}] (default 0)")
+    p.add_argument("--config", type=str, default=None,
+                   help="hyperparameter YAML (default: the packaged configs/<algo>.yml)")
+    p.add_argument("--out", type=str, default=None, help="run folder (default runs/<algo>)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue the run in --out from its latest good checkpoint or final "
+                        "model; the step counter continues")
+    p.add_argument("--eval-freq", type=int, default=None,
+                   help="env steps between evaluations, >= 1 (default: config); a run always "
+                        "ends with one")
+    p.add_argument("--eval-episodes", type=int, default=5,
+                   help="episodes per evaluation, >= 1 (default 5)")
+    p.add_argument("--checkpoint-freq", type=int, default=None,
+                   help="env steps between checkpoints, >= 1 (default: config)")
+    p.add_argument("--torch-threads", type=int, default=1,
+                   help="torch threads (default 1: two threads were measured up to 30x slower "
+                        "on 2-core machines under load)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", type=int, default=0)
+    fan = p.add_argument_group("many runs on Ray (pip install \"tether_gym[ray]\")")
+    fan.add_argument("--seeds", type=int, default=None, metavar="N",
+                     help="train seeds --seed ... --seed+N-1 into <out>/seed_K/, one Ray task "
+                          "each; re-running skips finished seeds and resumes interrupted ones")
+    fan.add_argument("--ray-address", default=None, metavar="auto|HOST:PORT",
+                     help="existing Ray cluster (default: $RAY_ADDRESS, else a local instance "
+                          "with one CPU per run)")
+    fan.add_argument("--sweep", type=Path, default=None, metavar="FILE.yml",
+                     help="search config keys x several seeds per trial, rank by the median "
+                          "final evaluation return (file format: tether_gym_agents.training.sweep)")
+    return p

@@ -41,7 +41,7 @@ from pathlib import Path
 from types import MappingProxyType
 
 from ..baselines.open_loop import PeriodicReel, RandomPolicy, ZeroStateReel
-from ..common.obs import RATE_ENV_KWARGS
+from ..common.obs import RATE_ENV_KWARGS, with_rate_mode
 from ..files import TrainedAgent, hybrid_of, pretrained_agents, seed_runs
 from . import nominal
 from .scenarios import Scenario
@@ -294,10 +294,8 @@ def _alone_env_kwargs(name: str, agents: list) -> dict:
 
 def _residual_env_kwargs(name: str, agents: list) -> dict:
     """A residual hybrid commands reel rates; its residual must have been trained so."""
-    modes = {agent.env_kwargs.get("action_mode", "rate") for agent in agents}
-    if modes != {"rate"}:
-        raise ValueError(f"policy {name!r}: a hybrid's residual must be trained "
-                         f"with action_mode='rate', its runs have {sorted(modes)}")
+    for agent in agents:
+        with_rate_mode(agent.env_kwargs, f"policy {name!r}: the residual of run {agent.path}")
     return _rate_mode()
 
 

@@ -14,7 +14,7 @@ import tether_gym
 
 from ..baselines.open_loop import PeriodicReel, ZeroStateReel
 from ..baselines.smc import SlidingModeController
-from ..common.obs import ReelRatePolicy
+from ..common.obs import with_rate_mode
 from ..evaluation.rollout import Trajectory, make_vector_env, rollout
 from .settings import OPEN_LOOP_SETTINGS
 
@@ -44,9 +44,9 @@ def run_episode(policy_for_env, orbits: float, options: dict | None = None, seed
         Env seed.
     **env_kwargs
         Further env arguments (the paper's laws command reel rates:
-        ``action_mode="rate"`` unless given).
+        ``action_mode="rate"``; another mode is a ValueError).
     """
-    kwargs = {**ReelRatePolicy.ENV_KWARGS, **env_kwargs, "orbits_per_episode": orbits}
+    kwargs = {**with_rate_mode(env_kwargs, "the paper's laws"), "orbits_per_episode": orbits}
     venv = make_vector_env(1, kwargs)
     try:
         return rollout(policy_for_env(venv), [seed], options=options, env=venv)[0]

@@ -9,8 +9,10 @@ Modules, from the bottom up (a module imports only those above it in this list):
 * :mod:`.resume`, :mod:`.callbacks`, :mod:`.curves`: pieces of a run;
 * :mod:`.run`: ``train(settings) -> RunSummary``, one run;
 * :mod:`.fanout`: seeds of one configuration as Ray tasks (records, not command lines);
-* :mod:`.sweep`: trials x seeds, ranked by the median final evaluation return;
-* :mod:`.train`: the command line of ``train.py`` (parse -> settings -> train).
+* :mod:`.sweep`: trials x seeds, ranked by the median final evaluation return.
+
+The command line of ``train.py`` (parse -> settings -> train) is
+:mod:`tether_gym_agents.cli.train`.
 
 The run folder's files are named, read and written by
 :mod:`tether_gym_agents.files.run_folder`.

@@ -18,6 +18,7 @@ import gymnasium as gym
 from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from ..common.features import FeatureSpec
 from ..common.jsonio import to_jsonable
+from ..common.obs import with_rate_mode
 from ..hybrids.residual_spec import ResidualSpec
 
 __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_KEYS",
@@ -184,16 +185,13 @@ def rate_mode_for(spec: ResidualSpec | None, env_kwargs: dict, source: str,
     """``env_kwargs`` with ``action_mode="rate"`` when a residual hybrid is trained."""
     if spec is None:
         return env_kwargs
-    mode = env_kwargs.get("action_mode")
-    if mode is None:
+    if "action_mode" not in env_kwargs:
         notes.append(f"{source}'s residual sets action_mode='rate' (the hybrid commands reel "
                      "rates)")
-        return {**env_kwargs, "action_mode": "rate"}
-    if mode != "rate":
-        raise ConfigError(f"{source}: residual needs action_mode 'rate' (the hybrid commands "
-                          f"reel rates), but env kwargs give action_mode={mode!r}; remove it "
-                          "or set it to 'rate'")
-    return env_kwargs
+    try:
+        return with_rate_mode(env_kwargs, f"{source}'s residual (the hybrid commands reel rates)")
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def parse_env_kwargs(items: list[str]) -> dict:

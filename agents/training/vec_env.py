@@ -11,7 +11,7 @@ which speaks SB3's protocol:
 * ``infos`` is a list of per-env dicts holding the env's documented ``info`` keys.
 
 Episode statistics for SB3's logger (``rollout/ep_rew_mean``): wrap the result in
-``VecMonitor`` (as ``agents/training/train.py`` does), or pass ``monitor=True`` to get
+``VecMonitor`` (as :mod:`tether_gym_agents.training.run` does), or pass ``monitor=True`` to get
 Monitor's ``infos[i]["episode"] = {"r": return, "l": length, "t": seconds}`` from the
 adapter itself; ``env_is_wrapped(Monitor)`` then answers True, so ``evaluate_policy``
 reads them and ``VecMonitor`` warns that it would count twice.

@@ -29,6 +29,7 @@ from ..params import (
 )
 from ..physics import Scales, TetherChain
 from ..tasks.reward import RewardWeights
+from .actions import INCREMENT, RATE
 from .layout import OBSERVATION
 
 __all__ = ["EnvConfig", "Action", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
@@ -79,7 +80,7 @@ class Reference:
         check_range("frequency", self.frequency, 0.0)
 
 
-ACTION_MODES = ("increment", "rate")
+ACTION_MODES = (INCREMENT, RATE)
 """Values of ``action_mode``."""
 
 
@@ -92,7 +93,7 @@ class Action:
     mode : str
         ``"increment"``: the action changes the normalised reel-rate command,
         u <- clip(u + increment_gain * a, -1, 1); ``"rate"``: the action is the
-        command, u = clip(a, -1, 1) (v0's action, and the paper's control input).
+        command, u = clip(a, -1, 1) (the paper's control input).
         Either way l'_cmd = u * max_reel_rate.
     increment_gain : float
         Largest change of u per control step [-], in (0, 2] (``"increment"`` only).

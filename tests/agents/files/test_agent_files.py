@@ -216,15 +216,11 @@ def test_export_copies_only_the_safe_files(tmp_path):
     assert agent_files_main(["export", str(src), str(tmp_path / "again")]) == 2
 
 
-def test_old_module_and_command_still_work(tmp_path):
-    """``python -m tether_gym_agents.files.agent_files`` and its imports are kept."""
+def test_module_command_runs(tmp_path):
+    """``python -m tether_gym_agents.files export --help`` is the exporter's command line."""
     import subprocess
     import sys
 
-    from tether_gym_agents.files import agent_files
-
-    assert agent_files.AgentLoadError is AgentLoadError and agent_files.main is agent_files_main
-    for module in ("tether_gym_agents.files", "tether_gym_agents.files.agent_files"):
-        proc = subprocess.run([sys.executable, "-m", module, "export", "--help"],
-                              capture_output=True, text=True, timeout=120)
-        assert proc.returncode == 0 and "seed_K" in proc.stdout, proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "tether_gym_agents.files", "export", "--help"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0 and "seed_K" in proc.stdout, proc.stderr

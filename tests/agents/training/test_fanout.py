@@ -17,12 +17,12 @@ import numpy as np
 import pytest
 import yaml
 
+from tether_gym_agents.cli.train import main
 from tether_gym_agents.files.run_folder import write_train_info
 from tether_gym_agents.training import fanout
 from tether_gym_agents.training.config import ConfigError
 from tether_gym_agents.training.fanout import RAY_PIP, RunState, run_state
 from tether_gym_agents.training.settings import TrainSettings
-from tether_gym_agents.training.train import main
 
 # 2 envs x n_steps 128 (the tiny config): one PPO update per 256 steps, three in TARGET
 TINY = ["--n-envs", "2", "--eval-freq", "128", "--checkpoint-freq", "256", "--eval-episodes",

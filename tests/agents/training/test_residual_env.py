@@ -14,11 +14,12 @@ import pytest
 import tether_gym
 from tether_gym.safety import SafetyFilter
 from tether_gym_agents import SlidingModeController
+from tether_gym_agents.cli.train import main
 from tether_gym_agents.evaluation.benchmark import PolicyKind, evaluate, resolve_policy
-from tether_gym_agents.files.agent_files import AGENT_FILE, AgentLoadError
+from tether_gym_agents.files.safe_format import AGENT_FILE, AgentLoadError
 from tether_gym_agents.files.trained import TrainedAgent, hybrid_of
+from tether_gym_agents.training.config import CONFIG_DIR, ConfigError, load_hyperparams
 from tether_gym_agents.training.residual_env import BaseLaw, ResidualSpec, ResidualVecEnv
-from tether_gym_agents.training.train import CONFIG_DIR, ConfigError, load_hyperparams, main
 from tether_gym_agents.training.vec_env import make_sb3_vec_env
 
 RATE = {"action_mode": "rate", "orbits_per_episode": 0.05}  # 13 steps per episode

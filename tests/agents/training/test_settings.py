@@ -9,9 +9,9 @@ import pytest
 import yaml
 
 import tether_gym
+from tether_gym_agents.cli.train import build_parser
 from tether_gym_agents.training.config import CONFIG_DIR, ConfigError
 from tether_gym_agents.training.settings import TrainOptions, TrainSettings, resolve_settings
-from tether_gym_agents.training.train import build_parser
 
 SHORT = ("orbits_per_episode=0.05",)
 

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 import yaml
 
+from tether_gym_agents.cli.train import main
+from tether_gym_agents.training.config import ConfigError
 from tether_gym_agents.training.sweep import (
     Search,
     apply_overrides,
@@ -20,7 +22,6 @@ from tether_gym_agents.training.sweep import (
     rank_trials,
     write_table,
 )
-from tether_gym_agents.training.train import ConfigError, main
 
 TINY = ["--n-envs", "2", "--eval-freq", "256", "--checkpoint-freq", "512", "--eval-episodes",
         "1", "--env-kwargs", "orbits_per_episode=0.05"]

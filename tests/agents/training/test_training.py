@@ -9,8 +9,9 @@ import pytest
 import yaml
 
 from tether_gym_agents.cli.evaluate import main as evaluate_main
+from tether_gym_agents.cli.train import main
 from tether_gym_agents.files.trained import TrainedAgent
-from tether_gym_agents.training.train import ConfigError, load_hyperparams, main, parse_env_kwargs
+from tether_gym_agents.training.config import ConfigError, load_hyperparams, parse_env_kwargs
 
 TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
         "--eval-episodes", "1", "--env-kwargs", "orbits_per_episode=0.05"]

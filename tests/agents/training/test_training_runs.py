@@ -11,10 +11,10 @@ import pytest
 import yaml
 from stable_baselines3.common.callbacks import EvalCallback
 
+from tether_gym_agents.cli.train import main
 from tether_gym_agents.files.trained import TrainedAgent
 from tether_gym_agents.training import callbacks
 from tether_gym_agents.training.config import ConfigError, resolve_env_kwargs, with_schedules
-from tether_gym_agents.training.train import main
 
 FAST = ["--n-envs", "2", "--no-progress", "--eval-episodes", "1"]
 SHORT = ["--env-kwargs", "orbits_per_episode=0.05"]

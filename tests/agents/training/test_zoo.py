@@ -11,7 +11,7 @@ import pytest
 import yaml
 
 import tether_gym
-from tether_gym_agents.training.train import CONFIG_DIR, load_hyperparams
+from tether_gym_agents.training.config import CONFIG_DIR, load_hyperparams
 
 TINY = {"ppo": ["n_envs:2", "n_steps:64", "batch_size:64"],
         "sac": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"]}

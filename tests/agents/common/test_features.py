@@ -10,11 +10,12 @@ import pytest
 import yaml
 
 from tether_gym.envs.layout import OBSERVATION
+from tether_gym_agents.cli.evaluate import main as evaluate_main
+from tether_gym_agents.cli.train import main
 from tether_gym_agents.common.features import FeatureSpec, add_features
-from tether_gym_agents.evaluation.benchmark import main as evaluate_main
-from tether_gym_agents.files.agent_files import AgentLoadError
+from tether_gym_agents.files.safe_format import AgentLoadError
 from tether_gym_agents.files.trained import TrainedAgent
-from tether_gym_agents.training.train import ConfigError, feature_spec, main
+from tether_gym_agents.training.config import ConfigError, feature_spec
 from tether_gym_agents.training.vec_env import FeatureVecEnv, make_sb3_vec_env
 
 TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
