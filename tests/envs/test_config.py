@@ -10,6 +10,7 @@ import pytest
 
 import tether_gym
 from tether_gym.envs import EnvConfig
+from tether_gym.envs.layout import OBSERVATION
 
 from .conftest import ENV_ID
 
@@ -146,3 +147,42 @@ def test_episode_steps_follow_orbits_per_episode():
     assert steps == math.ceil(0.1 * 2 * math.pi / 0.025) == 26
     assert EnvConfig.from_kwargs(orbits_per_episode=1.0, control_step=0.05,
                      physics_step=0.01).max_episode_steps == math.ceil(2 * math.pi / 0.05)
+
+
+def _observed_combinations() -> set[tuple[tuple[str, bool], ...]]:
+    """Every switch combination EnvConfig.observed produces (any observe_params, either way
+    randomised)."""
+    seen = set()
+    for observe in (None, True, False, "eccentricity"):
+        for extra in ({}, {"eccentricity_range": (0.0, 0.3)}, {"mass_range": 0.1}):
+            cfg = EnvConfig.from_kwargs(observe_params=observe, **extra)
+            seen.add(tuple(sorted(cfg.observed.items())))
+    return seen
+
+
+@pytest.mark.parametrize("n_bodies", [2, 3, 6])
+def test_every_observed_combination_keeps_every_field_inside_the_row(n_bodies):
+    """The kernel writes at OBSERVATION's static offsets: each field must lie in the row."""
+    n = n_bodies - 1
+    combinations = _observed_combinations()
+    assert len(combinations) > 1  # today: neither, e alone, both
+    for combination in combinations:
+        switches = dict(combination)
+        size = OBSERVATION.size(n, **switches)
+        covered = sorted((sl.start, sl.stop)
+                         for sl in OBSERVATION.slices(n, **switches).values())
+        assert covered[0][0] == 0 and covered[-1][1] == size, switches
+        assert all(a[1] == b[0] for a, b in zip(covered[:-1], covered[1:], strict=True)), switches
+
+
+def test_a_switch_combination_the_offsets_cannot_hold_is_rejected():
+    """Mass fractions without e: their static offset counts e, one past the row's end."""
+    with pytest.raises(ValueError, match=r"'masses' is on but \['eccentricity'\]"):
+        OBSERVATION.slices(2, eccentricity=False, masses=True)
+    for mask in range(2 ** len(OBSERVATION.groups)):
+        switches = {g: bool(mask >> k & 1) for k, g in enumerate(OBSERVATION.groups)}
+        try:
+            slices = OBSERVATION.slices(2, **switches)
+        except ValueError:
+            continue
+        assert max(sl.stop for sl in slices.values()) <= OBSERVATION.size(2, **switches)

@@ -9,6 +9,12 @@ tether (n = N-1 of them), so its offset in a row is ``c0 + c1 n`` with integers 
 fixed by the fields before it. The kernels read offsets from :meth:`Layout.index`
 (a named tuple of (c0, c1) pairs, a compile-time constant for numba) through
 :func:`at`; Python code gets slices and sizes from the same declaration.
+
+Optional groups are nested: because the offsets are static, a group switched on needs
+every optional group declared before it on too (the offsets of its fields count the
+earlier groups). :meth:`Layout.selected`, :meth:`~Layout.size` and :meth:`~Layout.slices`
+raise ValueError for any other combination, naming the groups, instead of giving
+slices past the end of the row.
 """
 
 from __future__ import annotations
@@ -43,7 +49,8 @@ class Field:
         Bounds of the value (observation space), -inf/inf when unbounded.
     optional : str or None
         Name of the switch that includes the field (e.g. ``"eccentricity"``); optional
-        fields must come after every mandatory one.
+        fields must come after every mandatory one, the fields of one group next to each
+        other, and a group is present only with every group declared before it.
     """
 
     name: str
@@ -64,20 +71,32 @@ class Layout:
         Name of the row (used for the index type's name).
     fields : sequence of Field
         The fields in row order.
+
+    Raises
+    ------
+    ValueError
+        When a field name repeats, a mandatory field follows an optional one, or the
+        fields of one optional group are not next to each other.
     """
 
     def __init__(self, name: str, fields: tuple[Field, ...]):
         names = [f.name for f in fields]
         if len(set(names)) != len(names):
             raise ValueError(f"layout {name!r} repeats a field name: {names}")
-        seen_optional = False
+        groups: list[str] = []
         for f in fields:
-            if f.optional is None and seen_optional:
+            if f.optional is None and groups:
                 raise ValueError(f"layout {name!r}: mandatory field {f.name!r} after an "
                                  "optional one")
-            seen_optional = seen_optional or f.optional is not None
+            if f.optional is not None and f.optional != (groups[-1] if groups else None):
+                if f.optional in groups:
+                    raise ValueError(f"layout {name!r}: field {f.name!r} of optional group "
+                                     f"{f.optional!r} is not next to the group's other "
+                                     f"fields (groups in row order: {groups})")
+                groups.append(f.optional)
         self.name = name
         self.fields = tuple(fields)
+        self._groups = tuple(groups)
         c0 = c1 = 0
         offsets = []
         for f in self.fields:
@@ -108,8 +127,37 @@ class Layout:
                 return f
         raise KeyError(f"layout {self.name!r} has no field {name!r}; fields: {list(self.names)}")
 
+    @property
+    def groups(self) -> tuple[str, ...]:
+        """Names of the optional groups (the switches), in row order."""
+        return self._groups
+
+    def check_switches(self, **switches: bool) -> None:
+        """Raise ValueError unless the switches name groups of this layout and are nested.
+
+        A group switched on needs every group declared before it on: the offsets are
+        static (:attr:`index`), so its fields are only where they are said to be when the
+        earlier groups are present.
+        """
+        unknown = sorted(set(switches) - set(self._groups))
+        if unknown:
+            raise ValueError(f"layout {self.name!r} has no optional group {unknown}; "
+                             f"groups: {list(self._groups)}")
+        for k, group in enumerate(self._groups):
+            off = [g for g in self._groups[:k] if not switches.get(g)]
+            if switches.get(group) and off:
+                raise ValueError(f"layout {self.name!r}: optional group {group!r} is on but "
+                                 f"{off} declared before it is off; a group needs every "
+                                 f"earlier group on (groups in row order: "
+                                 f"{list(self._groups)})")
+
     def selected(self, **switches: bool) -> tuple[Field, ...]:
-        """The fields present when the optional groups are switched as given."""
+        """The fields present when the optional groups are switched as given.
+
+        Raises ValueError (:meth:`check_switches`) for an unknown group or a group on
+        while one declared before it is off.
+        """
+        self.check_switches(**switches)
         return tuple(f for f in self.fields if f.optional is None or switches.get(f.optional))
 
     def size(self, n: int, **switches: bool) -> int:
