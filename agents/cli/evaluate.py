@@ -31,7 +31,7 @@ from ..evaluation.benchmark import (
     check_out_dir,
     evaluate,
 )
-from ..evaluation.registry import default_policies, resolve_policy
+from ..evaluation.registry import BASELINES, default_policies, resolve_policy
 from ..evaluation.results import markdown_tables
 from ..evaluation.scenarios import describe_suites, get_suite
 
@@ -54,8 +54,8 @@ NOTES = (
 
 def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("policies", nargs="*",
-                        help="registered policies (smc, smc_filtered, zero, periodic, "
-                             "random, and those added with register_policy), shipped agents "
+                        help=f"registered policies ({', '.join(BASELINES)}, and those "
+                             "added with register_policy), shipped agents "
                              "(ppo, ...), paths to trained agents (run folder, model file, or "
                              "a folder of seed_K run folders = one policy with several runs), "
                              "or handover:AGENT (the agent hands over to smc, filtered); "

@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 __all__ = ["episode_metrics", "convergence_orbits", "after_first_orbit", "METRICS",
-           "HIGHER_IS_BETTER", "FAILURES", "CONVERGENCE_TOL"]
+           "HIGHER_IS_BETTER", "LOWER_IS_BETTER", "FAILURES", "CONVERGENCE_TOL"]
 
 CONVERGENCE_TOL = 1e-3
 """Tracking tolerance of the convergence time [rad]."""
@@ -40,7 +40,12 @@ METRICS = ("tracking_rms", "final_error", "converge_orbits", "reel_effort", "ree
            "min_tension", "slack", "tumble", "length", "success", "chattering", "return")
 """Every metric of :func:`episode_metrics`, in table order."""
 HIGHER_IS_BETTER = frozenset({"success", "min_tension", "return"})
-"""Metrics where a larger value is better; for all others smaller is better."""
+"""Metrics where a larger value is better (the probability of improvement counts a larger
+value as the better one for these, a smaller one for all others)."""
+LOWER_IS_BETTER = frozenset({"tracking_rms", "final_error", "converge_orbits", "reel_effort",
+                             "reel_excursion", "slack", "tumble", "length", "chattering"})
+"""Metrics where a smaller value is better. Every metric of :data:`METRICS` is in exactly
+one of the two sets (a test checks it), so a new metric is classified on purpose."""
 FAILURES = ("slack", "tumble", "length")
 """Failure metrics (1 when the episode ended for that reason)."""
 

@@ -3,7 +3,8 @@
 * ``trajectories.png``: max_i |theta_i - theta_d| and l_1 + ... + l_n over the first
   scenario's first seed (run 0) of every policy; the title names the scenario, and an
   episode that ended in a failure ends with an ``x`` marker labelled with the reason.
-* ``metrics.png``: per metric, each policy's IQM (dot) with its 95 % stratified-bootstrap
+* ``metrics.png``: per column of the table (``results.TABLE_COLUMNS``, four panels to a
+  row), each policy's IQM (dot) with its 95 % stratified-bootstrap
   interval (bar), as rliable's ``plot_interval_estimates``; an undefined value (such as
   the convergence time of a policy that never converges) is written "n/a", never drawn.
 """
@@ -21,6 +22,8 @@ __all__ = ["plot_results", "PLOT_PIP"]
 
 PLOT_PIP = 'pip install "matplotlib>=3.7"'
 LOG_SCALE = ("tracking_rms", "final_error", "chattering", "reel_effort")
+PANELS_PER_ROW = 4
+"""Panels per row of ``metrics.png`` (one panel per column of the table)."""
 
 
 def _finite(x) -> bool:
@@ -77,14 +80,23 @@ def _trajectories(Figure, Canvas, trajectories: dict, scenario, out: Path) -> Pa
     return path
 
 
+def _grid(panels: int) -> tuple[int, int]:
+    """(rows, columns) of a grid of ``panels`` panels, :data:`PANELS_PER_ROW` to a row."""
+    rows = -(-panels // PANELS_PER_ROW)
+    return rows, min(panels, PANELS_PER_ROW)
+
+
 def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
     pols = results["policies"]
     names = list(pols)
-    fig = Figure(figsize=(13, 1.2 + 0.45 * len(names) * 2), layout="constrained")
+    rows, cols = _grid(len(TABLE_COLUMNS))
+    fig = Figure(figsize=(13, 1.2 + 0.45 * len(names) * rows), layout="constrained")
     Canvas(fig)
-    axes = fig.subplots(2, 4).ravel()
+    axes = fig.subplots(rows, cols, squeeze=False).ravel()
+    for ax in axes[len(TABLE_COLUMNS):]:
+        fig.delaxes(ax)  # the last row's empty places
     ys = np.arange(len(names))[::-1]
-    for ax, (key, title) in zip(axes, TABLE_COLUMNS, strict=True):
+    for ax, (key, title) in zip(axes[:len(TABLE_COLUMNS)], TABLE_COLUMNS, strict=True):
         values = [pols[p][key] for p in names]
         cis = [pols[p]["ci95"][key] for p in names]
         drawn = [v for v in values if _finite(v)]

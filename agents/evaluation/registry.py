@@ -2,12 +2,12 @@
 
 A policy name is, in the order tried:
 
-1. a **registered policy**: the built-in baselines (:data:`BASELINES`: ``smc``, the
-   paper's sliding-mode law; ``smc_filtered``, the same law behind the model-based
-   safety filter of :mod:`tether_gym.safety`; ``zero``, ``periodic``, ``random``; all
-   commanding reel rates, ``action_mode="rate"``) and whatever
-   :func:`register_policy` added, in user code or in a plugin package (entry-point
-   group :data:`ENTRY_POINT_GROUP`, loaded the first time a name is not found);
+1. a **registered policy**: the built-in baselines (see :data:`BASELINES`; the
+   sliding-mode law of the paper, alone and behind the model-based safety filter of
+   :mod:`tether_gym.safety`, and open-loop laws; all commanding reel rates,
+   ``action_mode="rate"``) and whatever :func:`register_policy` added, in user code or
+   in a plugin package (entry-point group :data:`ENTRY_POINT_GROUP`, loaded the first
+   time a name is not found);
 2. ``handover:AGENT`` (e.g. ``handover:ppo``): the hybrid
    :class:`~tether_gym_agents.hybrids.policies.HandoverPolicy` of a trained agent, which
    steers the transient and hands over to the sliding-mode law inside its boundary

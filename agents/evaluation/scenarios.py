@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["Scenario", "SUITES", "get_suite", "load_suite_file", "describe_suites",
-           "RANDOM_INIT"]
+           "RANDOM_INIT", "PAPER_SCENARIO"]
 
 RANDOM_INIT = {"initial_theta": (0.0, 0.0), "init_theta_range": 0.15, "init_dtheta_range": 0.1}
 """theta_i(0) uniform in +-0.15 rad, theta_i'(0) within +-0.1 of the reference rate."""
@@ -74,8 +74,13 @@ class Scenario:
         return merged
 
 
+PAPER_SCENARIO = Scenario("paper",
+                          "Sec. 4.3 case: theta(0) = (0.1, 0), theta'(0) = 0.2, e = 0.2")
+"""The paper's case (the env's defaults): the whole ``paper`` suite, and a scenario of the
+default suite (named, so that the paper suite never depends on a position)."""
+
 DEFAULT_SUITE = (
-    Scenario("paper", "Sec. 4.3 case: theta(0) = (0.1, 0), theta'(0) = 0.2, e = 0.2"),
+    PAPER_SCENARIO,
     Scenario("random_init", "theta_i(0) in +-0.15 rad, theta_i'(0) in 0.2 +- 0.1",
              dict(RANDOM_INIT)),
     Scenario("ecc_0.0", "random initial libration, circular orbit",
@@ -107,7 +112,7 @@ BEYOND_SUITE = (
 """Variations the shipped agents were not trained on, within the env's documented ranges
 (the generalisation check of docs/task_design.md; not used to choose any design)."""
 
-SUITES = {"default": DEFAULT_SUITE, "paper": DEFAULT_SUITE[:1], "beyond": BEYOND_SUITE}
+SUITES = {"default": DEFAULT_SUITE, "paper": (PAPER_SCENARIO,), "beyond": BEYOND_SUITE}
 
 
 SCENARIO_KEYS = ("name", "description", "env_kwargs", "nominal")

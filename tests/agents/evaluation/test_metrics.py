@@ -7,7 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from tether_gym_agents.evaluation.metrics import METRICS, convergence_orbits, episode_metrics
+from tether_gym_agents.evaluation.metrics import (
+    HIGHER_IS_BETTER,
+    LOWER_IS_BETTER,
+    METRICS,
+    convergence_orbits,
+    episode_metrics,
+)
 from tether_gym_agents.evaluation.rollout import Trajectory
 
 STEP = 0.025
@@ -31,6 +37,13 @@ def _trajectory(error_of_orbit, steps=754, failure=None, dl=0.01, reward=1.0):
                       action=action, command=action.copy(), reward=np.full(steps, reward),
                       failure=failure, truncated=failure is None,
                       settings={"control_step": STEP})
+
+
+def test_every_metric_says_which_way_is_better():
+    """The probability of improvement reads HIGHER_IS_BETTER: a new metric missing from
+    both sets would silently count the worse policy as the better one."""
+    assert not HIGHER_IS_BETTER & LOWER_IS_BETTER
+    assert HIGHER_IS_BETTER | LOWER_IS_BETTER == set(METRICS)
 
 
 def test_metrics_of_a_known_episode():

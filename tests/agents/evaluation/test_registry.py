@@ -43,6 +43,15 @@ class HoldLengths:
         return np.zeros((obs.shape[0], 2), dtype=np.float32), None
 
 
+def test_help_names_exactly_the_built_in_baselines(capsys):
+    """The help's list follows BASELINES: a new built-in appears without editing it."""
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert (f"registered policies ({', '.join(registry.BASELINES)}, and those added with "
+            "register_policy)") in text
+
+
 # --------------------------------------------------------------------------- #
 # a policy of one's own, scored beside the shipped ones
 # --------------------------------------------------------------------------- #
