@@ -168,9 +168,11 @@ class TrainOptions:
         return asdict(self)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrainSettings:
     """Everything one training run needs, resolved from the options and the config.
+
+    Built by keyword only (a field inserted in the record cannot shift the others).
 
     Attributes
     ----------
@@ -324,8 +326,9 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
         run["residual"] = residual.to_dict()
     if features is not None:
         run["features"] = features.to_dict()
-    return TrainSettings(options, out, params, run, env_kwargs, residual, features, **counts,
-                         source=source, notes=tuple(notes),
+    return TrainSettings(options=options, out=out, hyperparams=params, run=run,
+                         env_kwargs=env_kwargs, residual=residual, features=features,
+                         **counts, source=source, notes=tuple(notes),
                          command=options.argv() if command is None else tuple(command))
 
 

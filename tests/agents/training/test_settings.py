@@ -75,6 +75,26 @@ def test_resolved_once_then_derived_per_seed(tmp_path):
         replace(settings, n_envs=0)
 
 
+def test_settings_are_built_by_keyword_and_each_field_holds_its_value(tmp_path):
+    options = TrainOptions(out=str(tmp_path / "run"), env_kwargs=SHORT, n_envs=2)
+    settings = resolve_settings(options)
+    doc = yaml.safe_load((CONFIG_DIR / "ppo.yml").read_text())
+    block = doc[tether_gym.ENV_ID]
+    assert settings.options is options and settings.out == tmp_path / "run"
+    assert settings.run["policy"] == block["policy"] and "policy" not in settings.hyperparams
+    assert settings.env_kwargs["obs_noise"] == block["env_kwargs"]["obs_noise"]
+    assert settings.residual is None and settings.features is None
+    assert (settings.n_envs, settings.timesteps) == (2, block["n_timesteps"])
+    assert (settings.eval_freq, settings.checkpoint_freq) == (
+        doc["default"]["eval_freq"], doc["default"]["checkpoint_freq"])
+    assert settings.source == str(CONFIG_DIR / "ppo.yml")
+    values = [getattr(settings, f.name) for f in fields(TrainSettings)]
+    with pytest.raises(TypeError):
+        TrainSettings(*values)  # type: ignore[misc]
+    assert TrainSettings(**{f.name: getattr(settings, f.name)
+                            for f in fields(TrainSettings)}) == settings
+
+
 def test_resolution_errors_are_exceptions_with_their_message(tmp_path):
     with pytest.raises(ConfigError, match="--resume: .*config.yml not found"):
         resolve_settings(TrainOptions(out=str(tmp_path / "none"), resume=True))

@@ -1,4 +1,5 @@
-"""The shipped hyperparameter files work with rl-baselines3-zoo as they are."""
+"""The shipped hyperparameter files: keyed by the current env id, and working with
+rl-baselines3-zoo as they are."""
 
 from __future__ import annotations
 
@@ -11,10 +12,32 @@ import pytest
 import yaml
 
 import tether_gym
-from tether_gym_agents.training.config import CONFIG_DIR, load_hyperparams
+from tether_gym_agents.training.config import CONFIG_DIR, RUN_KEYS, load_hyperparams
+
+ZOO_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs")
+"""The keys of RUN_KEYS that rl_zoo3 reads itself (its ExperimentManager takes them out of
+the block before it passes the rest to the algorithm)."""
+OWN_KEYS = frozenset(RUN_KEYS) - frozenset(ZOO_KEYS)
+"""train.py's own keys: zoo would pass them to the algorithm, which rejects them."""
 
 TINY = {"ppo": ["n_envs:2", "n_steps:64", "batch_size:64"],
         "sac": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"]}
+
+
+CONFIGS = sorted(CONFIG_DIR.glob("*.yml"))
+
+
+def test_the_shipped_configs_are_found():
+    assert {"ppo.yml", "sac.yml"} <= {path.name for path in CONFIGS}
+
+
+@pytest.mark.parametrize("path", CONFIGS, ids=lambda path: path.name)
+def test_every_shipped_config_is_keyed_by_the_current_env_id(path):
+    """After an env-id bump, a block still keyed by the old id is never read: training
+    would silently fall back to the ``default`` block (no normalisation, no env kwargs)."""
+    blocks = set(yaml.safe_load(path.read_text()))
+    assert tether_gym.ENV_ID in blocks, (path.name, sorted(blocks))
+    assert blocks <= {tether_gym.ENV_ID, "default"}, (path.name, sorted(blocks))
 
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
@@ -22,10 +45,10 @@ def test_env_id_block_is_complete_for_zoo(algo):
     """rl_zoo3 reads only the env id's block (never `default`): it must hold everything."""
     doc = yaml.safe_load((CONFIG_DIR / f"{algo}.yml").read_text())
     block = doc[tether_gym.ENV_ID]
-    for key in ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs"):
+    for key in ZOO_KEYS:
         assert key in block, key
-    # train.py's own keys stay out of zoo's way (zoo would pass them to the algorithm)
-    assert not {"eval_freq", "checkpoint_freq"} & set(block)
+    # train.py's own keys stay out of zoo's way (in the default block)
+    assert not OWN_KEYS & set(block), sorted(OWN_KEYS & set(block))
     merged = load_hyperparams(CONFIG_DIR / f"{algo}.yml", algo, tether_gym.ENV_ID)
     assert merged == {**doc["default"], **block}
 
