@@ -31,6 +31,16 @@ def test_observed_state_follows_the_observation_declaration():
         assert optional == (f.optional is not None), f.name
 
 
+@pytest.mark.parametrize(("with_params", "with_eccentricity"),
+                         [(False, False), (False, True), (True, False), (True, True)])
+def test_layout_switches_are_the_optional_groups_of_the_observation(with_params,
+                                                                    with_eccentricity):
+    """An optional group added to OBSERVATION needs its switch here (and in from_env)."""
+    layout = ObservationLayout(n_tethers=2, frequency=1.0, max_reel_rate=0.5,
+                               with_params=with_params, with_eccentricity=with_eccentricity)
+    assert tuple(layout.switches) == OBSERVATION.groups
+
+
 @pytest.mark.parametrize("kwargs", [{}, {"observe_params": True},
                                     {"observe_params": "eccentricity", "n_bodies": 4},
                                     {"action_mode": "increment"}])

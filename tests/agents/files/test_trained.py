@@ -9,12 +9,29 @@ import numpy as np
 import pytest
 
 import tether_gym
-from tether_gym_agents.evaluation.registry import make_policy, resolve_policy
+from tether_gym_agents.evaluation.registry import (
+    HANDOVER_OF,
+    default_policies,
+    make_policy,
+    resolve_policy,
+)
+from tether_gym_agents.files.run_folder import seed_runs
 from tether_gym_agents.files.safe_format import AGENT_FILE, load_agent
 from tether_gym_agents.files.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
+from tether_gym_agents.training.settings import ALGOS
 
-SHIPPED = {"ppo": "rl", "ppo_symlog": "rl", "smc_residual": "hybrid"}
-"""Policies the package ships (each a folder of seed_K runs) and their kind."""
+
+def _kind(folder) -> str:
+    """The kind a shipped policy's run files record: ``hybrid`` when they name a hybrid."""
+    kinds = {"rl" if json.loads((run / AGENT_FILE).read_text()).get("hybrid") is None
+             else "hybrid" for run in seed_runs(folder) or [folder]}
+    assert len(kinds) == 1, (folder, kinds)
+    return kinds.pop()
+
+
+SHIPPED = {name: _kind(path) for name, path in pretrained_agents().items()}
+"""Policies the package ships (each a folder of seed_K runs) and the kind their run files
+record: every folder of ``agents/pretrained/``, so a newly shipped agent is checked too."""
 FEATURES = {"ppo_symlog": {"name": "symlog_errors", "scale": 0.01}}
 """The input features of the shipped policies that have any."""
 RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
@@ -22,7 +39,11 @@ RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
 
 
 def test_the_shipped_policies_are_there_without_pickles():
-    assert set(SHIPPED) <= set(pretrained_agents())
+    assert {"ppo", "ppo_g025", "ppo_symlog", "smc_residual"} <= set(SHIPPED)
+    assert set(HANDOVER_OF) <= set(SHIPPED)
+    assert set(SHIPPED) <= set(default_policies())  # python evaluate.py runs each of them
+    folders = {p.name for p in PRETRAINED_DIR.iterdir() if p.is_dir()}
+    assert folders == set(SHIPPED)  # no folder that is not an agent
     pickles = sorted(p.name for p in PRETRAINED_DIR.rglob("*") if p.suffix in (".zip", ".pkl"))
     assert pickles == []
 
@@ -36,7 +57,7 @@ def test_every_run_is_complete_and_acts_on_the_current_env(name):
         for file in RUN_FILES:
             assert (run / file).is_file(), (run, file)
         _, meta = load_agent(run)
-        assert meta["algo"] == "ppo" and meta["env"]["id"] == tether_gym.ENV_ID
+        assert meta["algo"] in ALGOS and meta["env"]["id"] == tether_gym.ENV_ID
         assert (meta.get("hybrid") is not None) == (SHIPPED[name] == "hybrid")
         assert meta["features"] == FEATURES.get(name)
         info = json.loads((run / "train_info.json").read_text())
