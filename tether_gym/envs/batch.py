@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import os
 import time
+import warnings
 import weakref
 from collections.abc import Callable
 from typing import NamedTuple
@@ -33,12 +34,13 @@ from ..tasks.reference import (
     periodic_reel_rate,
 )
 from ..tasks.reward import COMPONENTS
+from ..tasks.termination import TUMBLE_ANGLE, Failure
 from .config import EnvConfig
-from .layout import N_INFO_SCALARS, N_INFO_VECTORS, info_dict
+from .layout import N_INFO_SCALARS, N_INFO_VECTORS, I, info_dict
 from .step_kernel import Rows, StepConfig, new_row_work, step_rows
 from .workers import SLOTS, Relay, SpinWorker, yield_function
 
-__all__ = ["ChainBatch", "RESET_OPTION_KEYS", "check_options"]
+__all__ = ["ChainBatch", "RESET_OPTION_KEYS", "check_options", "check_startable"]
 
 RESET_OPTION_KEYS = ("nu",) + STATE.names
 """Keys of ``reset(options=...)``: the true anomaly and every state field."""
@@ -54,8 +56,11 @@ GIVE_UP, CAN_THREAD = yield_function()
 """The address of the workers' yield function, and whether it is a real one (else every
 step is serial)."""
 
-MAX_RESET_DRAWS = 100
-"""Draws per row before a configuration whose initial states all fail is rejected."""
+MAX_RESET_DRAWS = 1000
+"""Draws per row and reset before its episode starts failed (:meth:`ChainBatch.reset_rows`).
+
+A row that passes within the first 100 draws (the limit before) draws exactly what it
+drew before; only rows that exhausted 100 draws (which raised then) draw more."""
 
 
 def check_options(options, config: EnvConfig) -> dict:
@@ -177,7 +182,7 @@ class StartPlan(NamedTuple):
                                          np.full((1, 1), config.eccentricity),
                                          amplitude, frequency)
             if not np.all(eq10[1] != 0.0):
-                eq10 = None  # every start fails: refused by the general path
+                eq10 = None  # every start fails: check_startable refuses the config
         if STATE.names != ("theta", "dtheta", "length", "dlength"):
             raise RuntimeError(f"StartPlan assumes the state order theta, dtheta, length, "
                                f"dlength, not {STATE.names}")
@@ -215,10 +220,59 @@ class StartPlan(NamedTuple):
             state_high=np.concatenate([bounds[name][1] * ones for name in STATE.names]))
 
 
-class ChainBatch:
-    """Arrays and step logic for ``num`` environments with one :class:`EnvConfig`."""
+def check_startable(config: EnvConfig) -> None:
+    """Refuse a configuration whose every start is failed, as far as that is certain.
 
-    def __init__(self, config: EnvConfig, num: int):
+    Two cases are decided from the configuration alone: theta_d'(initial_nu) = -1 (the
+    reels' start rate, paper Eq. 10, divides by 1 + theta_d' = 0 whatever is drawn), and
+    a start with nothing drawn (the init_*_range arguments 0, e and the masses fixed)
+    that fails. Any other configuration has starts that pass with some probability
+    (every draw range holds its nominal value, which lies inside the bounds); a row
+    whose draws all fail starts failed instead (:meth:`ChainBatch.reset_rows`).
+
+    Raises
+    ------
+    ValueError
+        Naming the arguments that fix the failed start and the bounds it must meet.
+    """
+    plan = StartPlan.of(config)
+    if 1.0 + plan.dref == 0.0:
+        raise ValueError(
+            f"amplitude={config.amplitude!r}, frequency={config.frequency!r} and "
+            f"initial_nu={config.initial_nu!r} give theta_d'(initial_nu) = -1: the reels' "
+            "start rate (paper Eq. 10) divides by 1 + theta_d' = 0, so every start is "
+            "failed; choose them so that amplitude * frequency * cos(frequency * "
+            "initial_nu) != -1")
+    rnd = config.randomisation
+    if config.randomised or any((rnd.init_theta_range, rnd.init_dtheta_range,
+                                 rnd.init_length_range)):
+        return
+    probe = ChainBatch(config, 1, check_start=False)
+    first = np.zeros(1, dtype=np.int64)
+    probe._draw_rows(first, [np.random.default_rng(0)], {})
+    if probe._failed_at_start(first)[0]:
+        lo, hi = config.episode.length_bounds
+        raise ValueError(
+            f"every start of this configuration is failed ({probe._start_code(0)}: "
+            f"{probe._start_failure(0)}) and nothing is drawn (init_theta_range, "
+            "init_dtheta_range and init_length_range are 0, eccentricity and masses "
+            f"fixed): change initial_theta={config.initial_theta!r}, initial_lengths="
+            f"{config.initial_lengths!r}, or amplitude, frequency and initial_nu (theta'(0) "
+            f"= theta_d'(initial_nu) = {plan.dref:.4g}), so that the start has every "
+            f"|theta_i| < pi/2, every l_i inside length_bounds=({lo:g}, {hi:g}) and every "
+            "tension T^_i > 0")
+
+
+class ChainBatch:
+    """Arrays and step logic for ``num`` environments with one :class:`EnvConfig`.
+
+    Building one refuses a configuration whose every start is failed
+    (:func:`check_startable`; ``check_start=False`` skips that).
+    """
+
+    def __init__(self, config: EnvConfig, num: int, *, check_start: bool = True):
+        if check_start:
+            check_startable(config)
         self.config = config
         self.num = num
         n = config.n_tethers
@@ -257,6 +311,11 @@ class ChainBatch:
         self._index_buf = np.zeros(num, dtype=np.int64)
         self._action_buf = np.zeros((num, n))
         self._finalizer = weakref.finalize(self, _stop_workers, self._workers)
+        # rows whose episode starts failed (every draw failed) and their failure codes
+        self._start_failed = np.zeros(num, dtype=np.bool_)
+        self._start_codes = np.zeros(num, dtype=np.int64)
+        self._any_start_failed = False
+        self._warned = False
 
     # views kept for readability (the arrays live in self.rows)
     @property
@@ -297,17 +356,23 @@ class ChainBatch:
         row draws from its own generator in the single env's order (e, the masses,
         then theta, theta', l as one draw of 3n uniforms, then the observation noise);
         everything after the draws is computed for all the rows at once. A row whose
-        drawn initial state is already failed (slack, tumbled or a length out of bounds)
-        draws again from its generator, up to MAX_RESET_DRAWS times.
+        drawn initial state is already failed (slack, tumbled, a length out of bounds or
+        non-finite) draws again from its generator, up to MAX_RESET_DRAWS times. If
+        every draw failed, the row's episode starts failed, without an error (this can
+        happen inside a vector env's step, at an autoreset): it keeps its last draw,
+        ``info["failure"]`` names the reason, and its next :meth:`step` ends it.
 
         Raises
         ------
         ValueError
-            If the options fix a failed initial state, or a row's draws keep failing
-            (the configuration's ranges reach into the failure bounds).
+            If the options fix a failed initial state, or the draws of a start with
+            options keep failing (the options are the caller's; no autoreset has any).
         """
         opts = check_options(options, self.config)
         rows = np.asarray(rows, dtype=np.int64)
+        if self._any_start_failed:
+            self._start_failed[rows] = False
+            self._any_start_failed = bool(self._start_failed.any())
         for _ in range(MAX_RESET_DRAWS):
             self._draw_rows(rows, rngs, opts)
             failed = rows[self._failed_at_start(rows)]
@@ -318,11 +383,34 @@ class ChainBatch:
                 raise ValueError(f"reset options {options!r} give a failed initial state: "
                                  f"{self._start_failure(b)}")
             rows = failed  # redraw those rows from their generators, within the ranges
-        raise ValueError(f"the configuration starts failed: {len(rows)} row(s) still failed "
-                         f"after {MAX_RESET_DRAWS} draws each, e.g. "
-                         f"{self._start_failure(int(rows[0]))}; narrow the init_*_range "
-                         "arguments or move initial_theta / initial_lengths away from the "
-                         "failure bounds")
+        if opts:
+            raise ValueError(f"reset options {options!r}: the start is still failed after "
+                             f"{MAX_RESET_DRAWS} draws in {len(rows)} row(s), e.g. "
+                             f"{self._start_failure(int(rows[0]))}; narrow the init_*_range "
+                             "arguments or choose options away from the failure bounds")
+        self._begin_failed(rows)
+
+    def _begin_failed(self, rows: np.ndarray) -> None:
+        """Let the listed rows' episodes start failed; warn once per batch.
+
+        Their last draw stays, ``info`` reports the failure, and their next :meth:`step`
+        ends them (:meth:`_end_failed_starts`).
+        """
+        for b in rows.tolist():
+            code = self._start_code(b)
+            self._start_codes[b] = code
+            self.rows.info_s[I.failure[0], b] = code
+        self._start_failed[rows] = True
+        self._any_start_failed = True
+        if not self._warned:
+            self._warned = True
+            warnings.warn(
+                f"{MAX_RESET_DRAWS} draws of the start failed in {len(rows)} row(s), e.g. "
+                f"{self._start_failure(int(rows[0]))}: such an episode starts failed "
+                "(info['failure'] at the reset) and ends at its first step with reward 0; "
+                "narrow the init_*_range arguments or move initial_theta / "
+                "initial_lengths away from the failure bounds (said once per env)",
+                RuntimeWarning, stacklevel=4)
 
     def _failed_at_start(self, rows: np.ndarray) -> np.ndarray:
         """Mask of the listed rows whose initial state is non-finite or failed.
@@ -340,6 +428,22 @@ class ChainBatch:
         ok = ((y > plan.state_low) & (y < plan.state_high)).all(axis=1)
         ok &= ((tension > 0.0) & (tension < np.inf)).all(axis=1)
         return ~ok
+
+    def _start_code(self, b: int) -> Failure:
+        """Why row b's failed start is failed, as :func:`failure_code` orders the reasons.
+
+        (The start check has no divergence bound, so a failed start is non-finite, slack,
+        tumbled or out of length bounds.)
+        """
+        sl = self._plan.slices
+        y, tension = self.rows.y[b], self.rows.tension[b]
+        if not (np.isfinite(y).all() and np.isfinite(tension).all()):
+            return Failure.NONFINITE
+        if (tension <= 0.0).any():
+            return Failure.SLACK
+        if (np.abs(y[sl["theta"]]) >= TUMBLE_ANGLE).any():
+            return Failure.TUMBLE
+        return Failure.LENGTH
 
     def _start_failure(self, b: int) -> str:
         """Why row b's initial state fails, in words."""
@@ -433,6 +537,9 @@ class ChainBatch:
             If a stepped row's action is NaN or inf; then nothing has changed.
         """
         index = self._all_rows if rows is None else rows
+        if self._any_start_failed:
+            index = rows = self._end_failed_starts(action, index, checked)
+            checked = True
         threaded = n_chunks > 1 and len(index) > 1 and CAN_THREAD
         if self._random_step or threaded:
             if not checked:
@@ -450,6 +557,33 @@ class ChainBatch:
             self._raise_not_finite(action, bad)
         if meanwhile is not None:
             meanwhile()
+
+    def _end_failed_starts(self, action: np.ndarray, index: np.ndarray,
+                           checked: bool) -> np.ndarray:
+        """End the listed rows whose episode started failed; return the other rows.
+
+        Their step sets the failure code of the start and counts the step; nothing else
+        changes (the reward stays 0, the observation is the start's) and they draw
+        nothing. The actions of every listed row are checked first.
+
+        Raises
+        ------
+        ValueError
+            If a listed row's action is NaN or inf; then nothing has changed.
+        """
+        if not checked:
+            bad = self._check_finite(action, index)
+            if bad >= 0:
+                self._raise_not_finite(action, bad)
+        stuck = self._start_failed[index]
+        if not stuck.any():
+            return index
+        ended = index[stuck]
+        self.rows.failure[ended] = self._start_codes[ended]
+        self.rows.steps[ended] += 1
+        self._start_failed[ended] = False
+        self._any_start_failed = bool(self._start_failed.any())
+        return index[~stuck]
 
     @staticmethod
     def _raise_not_finite(action: np.ndarray, bad: int) -> None:

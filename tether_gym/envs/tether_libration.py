@@ -139,6 +139,20 @@ class TetherLibrationEnv(gym.Env):
     given. ``reset(options=...)`` may fix any of ``"nu"``, ``"theta"``, ``"dtheta"``,
     ``"length"``, ``"dlength"`` (per tether), overriding the draw.
 
+    A start is never failed: a draw that starts slack (any T^_i <= 0), tumbled (any
+    |theta_i| >= pi/2), with a length outside ``length_bounds`` or non-finite is drawn
+    again, up to 1000 times per reset. ``gym.make`` refuses (ValueError) a configuration
+    whose every start is certainly failed: theta_d'(``initial_nu``) = A w cos(w
+    ``initial_nu``) = -1 (Eq. 10's start rate divides by 1 + theta_d'), or a start with
+    nothing drawn (``init_*_range`` 0, e and masses fixed) that fails. Other
+    configurations whose ranges reach into the failure bounds can, rarely, fail all
+    1000 draws of a reset; that episode then starts failed instead of raising (also at
+    a vector env's autoreset inside ``step``): the observation is the last draw's,
+    ``info["failure"]`` at the reset names the reason, and the first step terminates
+    with that failure and reward 0 without moving the chain (a RuntimeWarning says it
+    once per env). Reset options that fix a failed start, or whose draws all fail,
+    raise ValueError.
+
     ## Episode End
 
     *Terminated* (``info["failure"]`` names the reason, None while healthy):

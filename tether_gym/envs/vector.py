@@ -101,7 +101,9 @@ class TetherLibrationVectorEnv(VectorEnv):
     ``metadata["autoreset_mode"]`` is ``AutoresetMode.NEXT_STEP`` (gymnasium's default):
     after a sub-env terminates or truncates, the next ``step`` ignores its action,
     resets it (continuing its generator, without options) and returns its reset
-    observation and info with reward 0 and terminated = truncated = False.
+    observation and info with reward 0 and terminated = truncated = False. An autoreset
+    never raises: a start whose draws all fail begins an episode that is failed from the
+    start and ends at its next step (the single env's Starting State).
 
     ## Episode End
 
