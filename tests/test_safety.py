@@ -194,3 +194,26 @@ def test_bad_inputs_raise(filt, cases, bad, match):
 def test_bad_margins_raise(env, kwargs, match):
     with pytest.raises(ValueError, match=match):
         SafetyFilter.for_env(env, **kwargs)
+
+
+@pytest.mark.parametrize("name, value", [
+    ("params", "abc"), ("params", [None] * 3), ("length_bounds", "ab"),
+    ("length_bounds", (0.1, "x")), ("length_bounds", 0.5)])
+def test_bad_constructor_values_name_the_argument(env, name, value):
+    """numpy's "could not convert string to float" named nothing (issue 24)."""
+    good = SafetyFilter.for_env(env)
+    kwargs = dict(params=good.par[0], n_tethers=good.n, max_reel_rate=good.max_reel_rate,
+                  physics_step=good.physics_step, substeps=good.substeps,
+                  length_bounds=good.length_bounds) | {name: value}
+    with pytest.raises((TypeError, ValueError)) as err:
+        SafetyFilter(**kwargs)
+    message = str(err.value)
+    assert message.startswith(f"{name}={value!r}") and "must" in message, message
+
+
+@pytest.mark.parametrize("name", ["nu", "state", "command"])
+def test_bad_project_values_name_the_argument(filt, cases, name):
+    nu, y, desired, _ = cases
+    kwargs = dict(nu=nu[0], state=y[:1], command=desired[:1]) | {name: "abc"}
+    with pytest.raises(TypeError, match=rf"^{name}='abc' must"):
+        filt.project(**kwargs)

@@ -22,7 +22,8 @@ tension T_i [N]                T^_i = T_i/(nu_dot^2 L0 m_tot)   nu_dot^2 L0 m_to
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import re
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 
@@ -39,6 +40,7 @@ __all__ = [
     "check_finite",
     "check_range",
     "as_float_tuple",
+    "renamed_error",
 ]
 
 EARTH_MU = 3.986004418e14
@@ -118,7 +120,8 @@ def as_float_tuple(name: str, value, length: int | None = None) -> tuple[float, 
     strings and complex numbers included).
     """
     if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
-        raise TypeError(f"{name} must be a sequence of numbers, got {type(value).__name__}")
+        raise TypeError(f"{name}={value!r} must be a sequence of numbers, got "
+                        f"{type(value).__name__}")
     try:
         raw = np.asarray(value)
     except ValueError as exc:  # ragged nesting
@@ -134,6 +137,23 @@ def as_float_tuple(name: str, value, length: int | None = None) -> tuple[float, 
         raise ValueError(f"{name}={value!r} must have {length} entries, got {arr.shape[0]}")
     check_finite(name, arr)
     return tuple(float(x) for x in arr)
+
+
+def renamed_error(exc: Exception, names: Mapping[str, str], prefix: str = "") -> Exception:
+    """``exc`` (a TypeError or ValueError of these checks) told in the caller's names.
+
+    The checks above begin their message with the name they were given (``"name=value
+    ..."`` or ``"name must ..."``). A message that begins with a key of ``names`` gets
+    that key replaced by its value (a field of a part by the argument a user passed,
+    ``time_constant`` by ``reel_time_constant``); any other message gets ``prefix`` put
+    in front. Returns a new exception of the same type (``exc`` itself when nothing
+    changes).
+    """
+    message = str(exc)
+    for field, name in names.items():
+        if re.match(rf"{re.escape(field)}(=| must )", message):
+            return type(exc)(name + message[len(field):])
+    return type(exc)(prefix + message) if prefix else exc
 
 
 def check_masses(masses, n: int | None = None) -> tuple[float, ...]:

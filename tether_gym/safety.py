@@ -43,7 +43,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .params import check_range
+from .params import as_float_tuple, check_range
 from .physics import kernels
 from .physics.layout import at
 from .physics.state import PARAMS, STATE, P
@@ -152,7 +152,8 @@ class SafetyFilter:
                  substeps: int, length_bounds: tuple[float, float],
                  margin: float = DEFAULT_MARGIN, length_margin: float = 0.0):
         self.n = _count("n_tethers", n_tethers)
-        par = np.ascontiguousarray(np.asarray(params, dtype=float).reshape(1, -1))
+        par = np.ascontiguousarray(_reals("params", params, "a parameter row (P,) of real "
+                                          "numbers, EnvConfig.param_rows").reshape(1, -1))
         if par.shape[1] != PARAMS.size(self.n):
             raise ValueError(f"params of shape {np.shape(params)} do not fit {self.n} tethers "
                              f"(need ({PARAMS.size(self.n)},), a row of EnvConfig.param_rows)")
@@ -160,7 +161,7 @@ class SafetyFilter:
         self.max_reel_rate = check_range("max_reel_rate", max_reel_rate, 0.0, low_open=True)
         self.physics_step = check_range("physics_step", physics_step, 0.0, low_open=True)
         self.substeps = _count("substeps", substeps)
-        lo, hi = (float(v) for v in length_bounds)
+        lo, hi = as_float_tuple("length_bounds", length_bounds, 2)
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
             raise ValueError(f"length_bounds={length_bounds!r} must be finite with "
                              "0 <= low < high")
@@ -255,9 +256,9 @@ class SafetyFilter:
                 np.minimum(stop - lo, hi - stop).min(axis=1))
 
     def _check(self, nu, state, command):
-        nu = np.asarray(nu, dtype=float)
-        y = np.asarray(state, dtype=float)
-        c = np.asarray(command, dtype=float)
+        nu = _reals("nu", nu, "a true anomaly [rad] or one per state")
+        y = _reals("state", state, "state rows (B, 4n) [STATE layout]")
+        c = _reals("command", command, "normalised commands (B, n)")
         m = STATE.size(self.n)
         if y.ndim != 2 or y.shape[1] != m:
             raise ValueError(f"state must have shape (B, {m}) for {self.n} tethers, got "
@@ -455,6 +456,21 @@ class SafetyFilter:
         r = np.arange(u)
         tension = tension.reshape(u, c, n)
         return cands[r, idx], any_ok, tension[r, idx], slack[r, idx]
+
+
+def _reals(name: str, value, what: str) -> np.ndarray:
+    """``value`` as a float array.
+
+    Raises TypeError naming ``name``, the value and ``what`` it must be unless it holds
+    real numbers (no bools, strings, None or complex numbers).
+    """
+    try:
+        raw = np.asarray(value)
+    except ValueError:  # ragged nesting
+        raw = np.asarray(None, dtype=object)
+    if raw.dtype.kind not in "iuf":
+        raise TypeError(f"{name}={value!r} must be {what}, got dtype {raw.dtype}")
+    return raw.astype(float)
 
 
 def _count(name: str, value) -> int:

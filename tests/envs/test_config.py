@@ -28,7 +28,7 @@ BAD_KWARGS = [
     ({"masses": (1.0, 0.0)}, ValueError, r"masses=\(1\.0, 0\.0\) must all be > 0"),
     ({"masses": (1.0, -2.0)}, ValueError, r"masses=\(1\.0, -2\.0\) must all be > 0"),
     ({"masses": (1.0, NAN)}, ValueError, r"masses=.*nan.* must be finite"),
-    ({"masses": "12"}, TypeError, r"masses must be a sequence"),
+    ({"masses": "12"}, TypeError, r"masses='12' must be a sequence of numbers, got str"),
     ({"initial_lengths": (0.5, NAN)}, ValueError, r"initial_lengths=.*nan.* must be finite"),
     ({"initial_theta": (1.6, 0.0)}, ValueError, r"initial_theta=\(1\.6, 0\.0\)"),
     ({"amplitude": NAN}, ValueError, r"amplitude=nan must be finite"),
@@ -186,3 +186,41 @@ def test_a_switch_combination_the_offsets_cannot_hold_is_rejected():
         except ValueError:
             continue
         assert max(sl.stop for sl in slices.values()) <= OBSERVATION.size(2, **switches)
+
+
+# for every gym.make argument a value out of its range (issue 24: reel_time_constant=0
+# answered with the internal name time_constant); test_every_argument_has_a_bad_value
+# keeps this list complete
+OUT_OF_RANGE = {
+    "n_bodies": 0, "masses": (1.0, -2.0), "initial_lengths": (0.5, -0.5),
+    "initial_theta": (2.0, 0.0), "initial_nu": NAN, "eccentricity": 1.5,
+    "semi_latus_rectum": -1.0, "mu": 0.0, "total_tether_length": -1.0, "gravity": "moon",
+    "amplitude": 2.0, "frequency": -1.0, "control_step": 0.0, "physics_step": 0.0,
+    "max_reel_rate": 0.0, "action_mode": "speed", "increment_gain": 3.0, "accel_limit": 0.0,
+    "speed_limit": -1.0, "reel_time_constant": 0, "length_bounds": (1.0, 0.0),
+    "orbits_per_episode": 0.0, "init_theta_range": -1.0, "init_dtheta_range": -1.0,
+    "init_length_range": -1.0, "obs_noise": -1.0, "disturbance": -1.0,
+    "eccentricity_range": (0.5, 0.1), "mass_range": 1.0, "observe_params": "masses",
+    "reward_weights": {"effort": -1.0}, "render_mode": "x",
+}
+
+
+def test_every_argument_has_a_bad_value():
+    assert sorted(OUT_OF_RANGE) == sorted(EnvConfig.names())
+
+
+@pytest.mark.filterwarnings("ignore:.*not in the possible render_modes")
+@pytest.mark.parametrize("name", sorted(OUT_OF_RANGE))
+@pytest.mark.parametrize("kind", ["out of range", "wrong type"])
+def test_a_bad_value_of_any_argument_names_the_argument_and_the_value(name, kind):
+    """The message names the gym.make argument (not a field of an internal part), the
+    value given and what is allowed."""
+    value = OUT_OF_RANGE[name] if kind == "out of range" else "abc"
+    with pytest.raises((TypeError, ValueError)) as err:
+        gym.make(ENV_ID, **{name: value})
+    # (gymnasium adds the kwargs to a TypeError: the message must name the value without it)
+    message = str(err.value).split(" was raised from the environment creator")[0]
+    assert message.startswith(name), message
+    shown = repr(value["effort"]) if isinstance(value, dict) else repr(value)
+    assert shown in message, message
+    assert any(word in message for word in ("must", "valid range", "not one of")), message

@@ -26,6 +26,7 @@ from ..params import (
     check_lengths,
     check_masses,
     check_range,
+    renamed_error,
 )
 from ..physics import Scales, TetherChain
 from ..tasks.reward import RewardWeights
@@ -215,8 +216,8 @@ class Randomisation:
             check_range("mass_range", self.mass_range, 0.0, 1.0, high_open=True)
         observe = self.observe_params
         if isinstance(observe, str) and observe != "eccentricity":
-            raise ValueError(f"observe_params={observe!r}: the only string it takes is "
-                             "'eccentricity' (e alone); else True, False or None")
+            raise ValueError(f"observe_params={observe!r} must be True, False, None or "
+                             "'eccentricity' (e alone; the only string it takes)")
         if not (observe is None or isinstance(observe, (bool, str))):
             raise TypeError(f"observe_params must be True, False, 'eccentricity' or None, got "
                             f"{observe!r}")
@@ -314,7 +315,11 @@ class EnvConfig:
             values = {attr: given[flat] if flat in given else _DEFAULTS.get(flat)
                       for flat, attr in names.items()
                       if flat in given or flat in _DEFAULTS}
-            parts[part] = klass(**values)
+            try:
+                parts[part] = klass(**values)
+            except (TypeError, ValueError) as exc:  # name the gym.make argument
+                raise renamed_error(exc, {attr: flat for flat, attr in names.items()
+                                          if attr != flat}) from None
         config = cls(n_bodies=int(n_bodies), **parts,
                      reward_weights=RewardWeights.from_dict(kwargs.get("reward_weights")),
                      render_mode=kwargs.get("render_mode"))

@@ -58,7 +58,7 @@ from typing import NamedTuple
 
 from numba import njit
 
-from ..params import check_range
+from ..params import check_range, renamed_error
 from ..physics.jit import INLINE
 from ..physics.layout import at
 from ..physics.state import S
@@ -143,12 +143,17 @@ class RewardWeights:
         if isinstance(values, RewardWeights):
             return values
         if not isinstance(values, dict):
-            raise TypeError(f"reward_weights must be a dict, got {type(values).__name__}")
+            raise TypeError(f"reward_weights={values!r} must be a dict of weights (or None), "
+                            f"got {type(values).__name__}")
         valid = set(asdict(cls()))
         unknown = sorted(set(values) - valid)
         if unknown:
             raise ValueError(f"unknown reward_weights keys {unknown}; valid keys: {sorted(valid)}")
-        return cls(**values)
+        try:
+            return cls(**values)
+        except (TypeError, ValueError) as exc:  # name the argument the user passed
+            raise renamed_error(exc, {key: f"reward_weights[{key!r}]" for key in valid},
+                                prefix="reward_weights: ") from None
 
     def record(self) -> RewardParams:
         """The weights as the kernels take them."""
