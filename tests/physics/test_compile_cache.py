@@ -83,12 +83,36 @@ def test_stamp_changes_with_any_source_file_and_the_version(tmp_path):
     assert source_stamp(pkg, "1.0") != stamp  # a moved file
 
 
-def test_installed_locator_keys_package_files_on_the_package_stamp():
+# what a fresh process installs for a package: its stamp, the package's source stamp, and
+# the stamp its locator gives a kernel (printed as JSON)
+INSTALLED_STAMPS = """
+import json, os, tether_gym
+from numba.core import caching
+from tether_gym.physics import compile_cache, jit, kernels
+impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+func = next(v.py_func for v in vars(kernels).values() if hasattr(v, "py_func"))
+locator = impl._locator_classes[0].from_function(func, func.__code__.co_filename)
+package = os.path.dirname(tether_gym.__file__)
+print(json.dumps([jit.CACHE.stamp, compile_cache.source_stamp(package, tether_gym.__version__),
+                  locator.get_source_stamp(), tether_gym.__file__]))
+"""
+
+
+def test_installed_locator_keys_package_files_on_the_package_stamp(tmp_path):
+    """The installed locator gives the package's kernels the install's stamp, and that
+    stamp is the source stamp of the package the process imported.
+
+    The second part runs in a fresh process over a copy of the package that nothing
+    edits: the stamp is taken once per process, at import, so a hash of this working
+    tree taken when this test runs (minutes later in a full run) differs from it as soon
+    as any package file was edited meanwhile, e.g. by another session working in the same
+    tree (a full run failed here that way).
+    """
     from numba.core import caching
 
     state = jit.CACHE
     assert state is compile_cache.state()
-    assert state.stamp == source_stamp(PACKAGE, tether_gym.__version__)
+    assert re.fullmatch(r"[0-9a-f]{64}", state.stamp)
     impl = getattr(caching, "CacheImpl", None) or caching._CacheImpl
     locator_cls = impl._locator_classes[0]
     assert locator_cls.__name__ == "PackageCacheLocator"
@@ -102,6 +126,15 @@ def test_installed_locator_keys_package_files_on_the_package_stamp():
     # files outside the package keep numba's own locators
     assert locator_cls.from_function(test_stamp_changes_with_any_source_file_and_the_version,
                                      __file__) is None
+    root = copy_package(tmp_path / "copy")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env.update({"PYTHONPATH": root, "NUMBA_CACHE_DIR": str(tmp_path / "numba")})
+    out = subprocess.run([sys.executable, "-c", INSTALLED_STAMPS], cwd=root, env=env,
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    installed, package, located, init = json.loads(out.stdout.strip().splitlines()[-1])
+    assert init == os.path.join(root, "tether_gym", "__init__.py")
+    assert installed == package == located
 
 
 # ---------------------------------------------------------------------- place
@@ -181,11 +214,11 @@ def copy_package(dest) -> str:
     return str(dest)
 
 
-def run_trajectory(root: str, user: list[str] | None = None, env_extra=None):
+def run_trajectory(root: str, env_extra=None):
     env = {k: v for k, v in os.environ.items()
            if k not in ("NUMBA_CACHE_DIR", "XDG_CACHE_HOME", "PYTHONPATH")}
     env.update({"PYTHONPATH": root, "NUMBA_NUM_THREADS": "1", **(env_extra or {})})
-    out = subprocess.run((user or []) + [sys.executable, "-c", TRAJECTORY], cwd=root, env=env,
+    out = subprocess.run([sys.executable, "-c", TRAJECTORY], cwd=root, env=env,
                          capture_output=True, text=True, timeout=1200)
     if out.returncode != 0:
         raise AssertionError(f"subprocess failed ({out.returncode}):\n{out.stderr}")
@@ -220,40 +253,64 @@ def test_an_edited_helper_reaches_the_env_with_a_warm_cache(tmp_path):
     assert reverted == cold
 
 
-def unprivileged_prefix() -> list[str] | None:
-    """How to run a command as a user without write access to the copy, or None."""
-    if os.geteuid() != 0:
-        return []
-    for cmd in (["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"],
-                ["runuser", "-u", "nobody", "--"]):
-        try:
-            ok = subprocess.run(cmd + ["true"], capture_output=True, timeout=30).returncode == 0
-        except (OSError, subprocess.TimeoutExpired):
-            ok = False
-        if ok:
-            return cmd
-    return None
+def make_uncacheable(top: str, package: str) -> list[str]:
+    """Leave no place under ``top`` where this process could write a cache; the
+    regular files it planted (for any user, root included, and on any machine).
+
+    The copy becomes read-only (mode 555 / 444). Permission bits bind an ordinary user
+    but not root (nor a process with CAP_DAC_OVERRIDE): when this process can still
+    create a directory in the copy, every source directory of the package gets a regular
+    *file* named ``__pycache__``, where nobody can create the cache directory (nor
+    Python its bytecode).
+    """
+    for dirpath, _dirs, files in os.walk(top):
+        os.chmod(dirpath, 0o555)  # readable and traversable by anyone, not writable
+        for name in files:
+            os.chmod(os.path.join(dirpath, name), 0o444)
+    probe = os.path.join(package, "__pycache__")
+    try:
+        os.mkdir(probe)
+    except OSError:
+        return []  # the bits bind this process: the copy is read-only for it
+    os.rmdir(probe)
+    planted = []
+    for dirpath, dirs, files in os.walk(package):
+        dirs[:] = [d for d in dirs if not d.startswith(".")]
+        if any(name.endswith(".py") for name in files):
+            path = os.path.join(dirpath, "__pycache__")
+            with open(path, "w"):
+                pass
+            planted.append(path)
+    return planted
 
 
 @pytest.mark.slow  # 1 subprocess compiling the env kernels in memory (~20-60 s)
 def test_read_only_install_compiles_in_memory_with_one_warning():
-    prefix = unprivileged_prefix()
-    if prefix is None:
-        pytest.skip("running as root and neither setpriv nor runuser can switch to an "
-                    "unprivileged user")
+    """A package copy where no cache can be written (read-only, or blocked by files where
+    permission bits do not bind, as for root), and a HOME under a regular file: the env
+    runs with the kernels compiled in memory, one warning, nothing written, and the
+    trajectory of an install with a cache.
+
+    Run as the current user with this interpreter, so it holds wherever the tests run
+    (it ran the copy as uid 65534 before, which fails where that user cannot enter the
+    interpreter's directory, e.g. a pyenv Python under /root).
+    """
     top = tempfile.mkdtemp(prefix="tether_gym_ro_")
     try:
         root = copy_package(top)
-        for dirpath, _dirs, files in os.walk(top):
-            os.chmod(dirpath, 0o555)  # readable and traversable by anyone, not writable
-            for name in files:
-                os.chmod(os.path.join(dirpath, name), 0o444)
-        obs, err = run_trajectory(root, prefix, {"HOME": "/nonexistent/home"})
+        blocker = os.path.join(top, "a_file")
+        with open(blocker, "w") as f:
+            f.write("a regular file: nothing can be created below it, even by root\n")
+        planted = make_uncacheable(top, os.path.join(root, "tether_gym"))
+        obs, err = run_trajectory(root, env_extra={
+            "HOME": os.path.join(blocker, "home"),
+            "XDG_CACHE_HOME": os.path.join(blocker, "xdg")})
         assert err.count("CompileCacheWarning") == 1, err
         assert "no writable cache directory" in err and "NUMBA_CACHE_DIR" in err
         assert "caching is off" in err
         written = [d for d, _, _ in os.walk(top) if d.endswith("__pycache__")]
         assert written == []
+        assert all(os.path.isfile(p) and os.path.getsize(p) == 0 for p in planted)
         # the same trajectory as this process computes with its own cache
         namespace: dict = {}
         buffer = io.StringIO()
