@@ -229,7 +229,13 @@ class TetherLibrationEnv(gym.Env):
       unchanged, as are the trajectories for the same reel commands. v0 is no
       longer registered (``gym.make`` of v0 names v1). tether_gym 0.4.0 adds
       ``observe_params="eccentricity"`` (e without the mass fractions); every
-      configuration that existed before returns what it returned.
+      configuration that existed before returns what it returned. tether_gym 0.5.0:
+      a configuration whose every start is certainly failed is refused by
+      ``gym.make``, and a start that 1000 draws cannot make valid (where 0.4.x raised
+      after 100, at a reset or inside a vector env's ``step``) begins an episode
+      that is failed from the start (Starting State); every start that 0.4.x drew
+      is drawn bitwise the same, so every configuration that worked returns what it
+      returned, and no id changes.
     * v0: initial release. tether_gym 0.2.0 keeps v0: with every configuration that
       worked before, trajectories, observations, terminations and info entries are
       bitwise those of 0.1.0, except that the reel acceleration is now computed by one
