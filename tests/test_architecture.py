@@ -53,18 +53,7 @@ def _layer(path: Path) -> str | None:
 
 def _imports(source: str, package: str) -> list[str]:
     """Absolute names of every module imported by ``source`` (a module of ``package``)."""
-    names = []
-    for node in ast.walk(ast.parse(source)):
-        if isinstance(node, ast.Import):
-            names += [alias.name for alias in node.names]
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                parts = package.split(".")
-                base = parts[: len(parts) - node.level + 1]
-                names.append(".".join(base + ([node.module] if node.module else [])))
-            else:
-                names.append(node.module or "")
-    return names
+    return _resolved_imports(source, package, is_package=True, known=set())
 
 
 def _violations(source: str, package: str, own: str | None) -> list[str]:
