@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import copy
 import json
+import shlex
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -31,7 +32,7 @@ from ..files.run_folder import (
 from .config import algo_class, with_schedules
 from .settings import TrainSettings
 
-__all__ = ["RunSummary", "train", "make_venv"]
+__all__ = ["RunSummary", "train", "make_venv", "evaluate_command"]
 
 
 @dataclass(frozen=True)
@@ -133,9 +134,14 @@ def train(settings: TrainSettings) -> RunSummary:
     venv.close()
     eval_env.close()
     print(f"trained {settings.algo.upper()} to step {model.num_timesteps} in {wall:.0f} s "
-          f"({total_wall:.0f} s in all calls); run folder {out}; evaluate with "
-          f"`python evaluate.py {out}`")
+          f"({total_wall:.0f} s in all calls); run folder {out}; evaluate it beside the "
+          f"paper's law (on the env it was trained on) with {evaluate_command(out)}")
     return RunSummary(out, int(model.num_timesteps), wall, total_wall)
+
+
+def evaluate_command(out: Path) -> str:
+    """The evaluate command a finished run prints, quoted for a POSIX shell."""
+    return "`" + shlex.join(["python", "evaluate.py", "smc", str(out)]) + "`"
 
 
 def _model(settings: TrainSettings):
