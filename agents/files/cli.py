@@ -17,18 +17,21 @@ PROG = "python -m tether_gym_agents.files"
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog=PROG,
                                      description="Convert a stable-baselines3 run folder "
-                                                 "(pickles) to a safe agent folder.")
+                                                 "(pickles; train.py's or rl_zoo3's) to a safe "
+                                                 "agent folder, or export runs' safe files.")
     sub = parser.add_subparsers(dest="cmd", required=True)
     conv = sub.add_parser("convert", help="write agent.json + policy.safetensors from a run folder")
-    conv.add_argument("run", type=Path, help="run folder or model .zip")
+    conv.add_argument("run", type=Path, help="run folder or model .zip (train.py's, or "
+                                             "rl_zoo3's logs/ALGO/ENV_NAME_N)")
     conv.add_argument("--out", type=Path, default=None,
                       help="agent folder (default: RUN itself for best_model.zip, else "
-                           "RUN/final_agent)")
+                           "RUN/final_agent; rl_zoo3 runs: RUN/final_agent from ENV_NAME.zip)")
     conv.add_argument("--allow-pickle", action="store_true",
                       help="required: the conversion unpickles the run's files once")
     exp = sub.add_parser("export", help="copy the safe files of a run, or of every seed_K "
                                         "run of a folder, to share or ship them")
-    exp.add_argument("src", type=Path, help="run folder or folder of seed_K run folders")
+    exp.add_argument("src", type=Path, help="run folder or folder of seed_K run folders (only "
+                                            "regular files inside it are read)")
     exp.add_argument("dest", type=Path, help="destination folder")
     return parser
 

@@ -20,7 +20,14 @@ from .run_folder import (
     read_train_info,
     seed_runs,
 )
-from .safe_format import AGENT_FILE, WEIGHTS_FILE, AgentLoadError, is_unit, save_agent
+from .safe_format import (
+    AGENT_FILE,
+    WEIGHTS_FILE,
+    AgentLoadError,
+    checked_file,
+    is_unit,
+    save_agent,
+)
 
 __all__ = ["EXPORTED_FILES", "EXPORTED_FOLDER_FILES", "export_runs", "convert_run"]
 
@@ -37,7 +44,16 @@ def export_runs(src, dest) -> list[Path]:
 
     Only :data:`EXPORTED_FILES` (and the folder's :data:`EXPORTED_FOLDER_FILES`) are
     copied; every run must hold a safe agent (``agent.json`` + ``policy.safetensors``).
-    Returns the run folders written. Raises AgentLoadError naming a run without one.
+    Every file to copy must be a regular file inside ``src`` (a symlink whose target
+    stays inside ``src`` is copied as the file it points to); all are checked before
+    anything is written, and a symlink at a destination name is replaced, never written
+    through. Returns the run folders written.
+
+    Raises
+    ------
+    AgentLoadError
+        Naming a run without a safe agent, or a file that leads outside ``src`` or is
+        not a regular file (a symlink to ``/etc/passwd``, a FIFO): nothing is copied then.
     """
     src, dest = Path(src), Path(dest)
     runs = seed_runs(src)
@@ -46,15 +62,17 @@ def export_runs(src, dest) -> list[Path]:
         if not is_unit(run):
             raise AgentLoadError(f"{run} holds no safe agent ({AGENT_FILE} + {WEIGHTS_FILE}); "
                                  "convert it first")
-    for run, out in pairs:
-        for name in EXPORTED_FILES:
-            if (run / name).is_file():
-                (out / name).parent.mkdir(parents=True, exist_ok=True)
-                shutil.copy2(run / name, out / name)
+    copies = [(run / name, out / name) for run, out in pairs for name in EXPORTED_FILES]
     if runs:
-        for name in EXPORTED_FOLDER_FILES:
-            if (src / name).is_file():
-                shutil.copy2(src / name, dest / name)
+        copies += [(src / name, dest / name) for name in EXPORTED_FOLDER_FILES]
+    copies = [(a, b) for a, b in copies if a.exists() or a.is_symlink()]
+    for source, _ in copies:
+        checked_file(src, source)
+    for source, target in copies:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        if target.is_symlink():
+            target.unlink()
+        shutil.copy2(source, target)
     return [out for _, out in pairs]
 
 

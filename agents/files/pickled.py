@@ -4,6 +4,11 @@ Both files can run arbitrary code when they are loaded (cloudpickled entries in 
 zip's ``data``, a plain pickle); they are read only by :func:`load_pickled_run`, behind
 an explicit ``allow_pickle=True``, and :func:`~tether_gym_agents.files.export.convert_run`
 turns such a run folder into a safe agent folder once.
+
+Two layouts are read: ``train.py``'s run folders (:mod:`.run_folder`) and rl-baselines3-zoo's
+(:mod:`.zoo_folder`: ``LOGS/ALGO/<ENV_NAME>_<N>/`` with ``<ENV_NAME>.zip`` and
+``<ENV_NAME>/{config.yml,args.yml,vecnormalize.pkl}``). Every file is read only if it is a
+regular file inside the run folder (:mod:`.folder_paths`).
 """
 
 from __future__ import annotations
@@ -22,10 +27,18 @@ from .run_folder import (
     VECNORMALIZE_FILE,
     read_config,
 )
-from .safe_format import AGENT_FILE, ALGOS, AgentLoadError, ObsNormalization, recorded_spec
+from .safe_format import (
+    AGENT_FILE,
+    ALGOS,
+    AgentLoadError,
+    ObsNormalization,
+    checked_file,
+    recorded_spec,
+)
+from .zoo_folder import ZooFolderError, ZooRun, find_zoo_run, zoo_config
 
 __all__ = ["PICKLED_MODEL_FILES", "PICKLE_WARNING", "PickledRun", "load_pickled_run",
-           "run_hybrid", "run_features"]
+           "run_hybrid", "run_features", "is_pickled_run"]
 
 PICKLED_MODEL_FILES = (BEST_MODEL_FILE, FINAL_MODEL_FILE, "model.zip")
 """stable-baselines3 model files that a run folder may hold (pickled: opt-in only)."""
@@ -64,6 +77,24 @@ def _refuse(files) -> AgentLoadError:
         "allow_pickle=True (evaluate.py --allow-pickle)")
 
 
+def is_pickled_run(path) -> bool:
+    """Whether ``path`` is a run folder of pickled files (``train.py``'s or rl_zoo3's)."""
+    path = Path(path)
+    if any((path / f).is_file() for f in PICKLED_MODEL_FILES):
+        return True
+    try:
+        return find_zoo_run(path) is not None
+    except ZooFolderError:
+        return True  # a zoo run without a model: load_pickled_run says what is missing
+
+
+def _zoo_run(path: Path) -> ZooRun | None:
+    try:
+        return find_zoo_run(path)
+    except ZooFolderError as exc:
+        raise AgentLoadError(str(exc)) from None
+
+
 def _model_file(path: Path) -> tuple[Path, Path]:
     """(run folder, model file) that ``path`` designates."""
     if path.is_dir():
@@ -92,15 +123,21 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
     """
     import zipfile
 
-    run_dir, model_path = _model_file(Path(path))
-    stats = run_dir / VECNORMALIZE_FILE
+    zoo = _zoo_run(Path(path))
+    if zoo is not None:
+        run_dir, model_path, stats = zoo.run_dir, zoo.model_path, zoo.stats_path
+    else:
+        run_dir, model_path = _model_file(Path(path))
+        stats = run_dir / VECNORMALIZE_FILE
     if not allow_pickle:
         raise _refuse([model_path] + ([stats] if stats.is_file() else []))
-    cfg = _run_config(run_dir, model_path)
+    checked_file(run_dir, model_path)
+    cfg = _run_config(run_dir, model_path) if zoo is None else _zoo_config(zoo)
     algo = (algo or cfg.get("algo") or "").lower()
     if algo not in ALGOS:
-        raise AgentLoadError(f"{run_dir / CONFIG_FILE} does not record the algorithm ('algo: "
-                             f"ppo|sac'), got {cfg.get('algo')!r}")
+        where = run_dir / CONFIG_FILE if zoo is None else zoo.params_dir / "args.yml"
+        raise AgentLoadError(f"{where} does not record a supported algorithm (one of "
+                             f"{list(ALGOS)}), got {cfg.get('algo')!r}")
     normalize = (cfg.get("hyperparams") or {}).get("normalize", None)
     if normalize is None:
         raise AgentLoadError(f"{run_dir / CONFIG_FILE} does not record hyperparams.normalize: "
@@ -116,8 +153,18 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
     norm = None
     if normalize is not False and (not isinstance(normalize, dict)
                                    or normalize.get("norm_obs", True)):
-        norm = _pickled_stats(stats, model_path)
+        norm = _pickled_stats(run_dir, stats, model_path)
     return PickledRun(model, norm, algo, run_dir, model_path, cfg)
+
+
+def _zoo_config(zoo: ZooRun) -> dict:
+    """The settings of an rl_zoo3 run (its YAML read as plain data)."""
+    for name in ("config.yml", "args.yml"):
+        checked_file(zoo.run_dir, zoo.params_dir / name)
+    try:
+        return zoo_config(zoo)
+    except ZooFolderError as exc:
+        raise AgentLoadError(str(exc)) from None
 
 
 def _run_config(run_dir: Path, model_path: Path) -> dict:
@@ -127,20 +174,22 @@ def _run_config(run_dir: Path, model_path: Path) -> dict:
     if not (run_dir / CONFIG_FILE).is_file():
         raise AgentLoadError(f"agent {model_path} is incomplete: {CONFIG_FILE} (algorithm, "
                              "normalisation) is missing beside it")
+    checked_file(run_dir, run_dir / CONFIG_FILE)
     try:
         return read_config(run_dir)
     except yaml.YAMLError as exc:
         raise AgentLoadError(f"{run_dir / CONFIG_FILE} is not valid YAML: {exc}") from None
 
 
-def _pickled_stats(stats: Path, model_path: Path) -> ObsNormalization:
-    """The observation statistics of a pickled ``vecnormalize.pkl``."""
+def _pickled_stats(run_dir: Path, stats: Path, model_path: Path) -> ObsNormalization | None:
+    """The observation statistics of a pickled ``vecnormalize.pkl`` (None: norm_obs off)."""
     import pickle
 
     if not stats.is_file():
         raise AgentLoadError(f"agent {model_path} is incomplete: its observation "
                              f"statistics {stats.name} are missing ({CONFIG_FILE} says "
                              "observations were normalised)")
+    checked_file(run_dir, stats)
     try:
         with open(stats, "rb") as fh:
             vecnorm = pickle.load(fh)
@@ -148,6 +197,8 @@ def _pickled_stats(stats: Path, model_path: Path) -> ObsNormalization:
         raise AgentLoadError(f"corrupt normalisation statistics {stats}: {exc}") from exc
     if not hasattr(vecnorm, "obs_rms"):
         raise AgentLoadError(f"{stats} does not hold VecNormalize statistics")
+    if getattr(vecnorm, "norm_obs", True) is False:
+        return None
     return ObsNormalization.of_stats(vecnorm.obs_rms, vecnorm.clip_obs, vecnorm.epsilon)
 
 

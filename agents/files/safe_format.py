@@ -27,6 +27,23 @@ action_space, lr_schedule, **policy_kwargs)``; classes are looked up by name in 
 allow-list, never imported from the file) and loads the weights into it. A missing or
 modified piece is an error that names it. stable-baselines3's pickled files are read
 only by :mod:`tether_gym_agents.files.pickled`, on explicit opt-in.
+
+Files are read only if they are regular files inside the agent folder (a symlink whose
+resolved target stays inside the folder is read; one that leads out, or a device or FIFO,
+is an error naming the file: :mod:`.folder_paths`).
+
+Before anything is allocated, the values of ``agent.json`` are checked
+(:mod:`.agent_values`); each value out of bounds is an :class:`AgentLoadError` naming the
+file, the key and what is allowed:
+
+* ``env.id``: an id tether_gym registers (``tether_gym/TetherLibration-v1``) or null;
+  ``env.kwargs`` a mapping.
+* ``obs_normalization``: ``mean`` finite; ``var`` finite and >= 0; ``clip_obs`` a finite
+  number > 0; ``epsilon`` a finite number in [0, 1]; ``count`` a finite number >= 0.
+* spaces: 1 to 4 axes, at most 100,000 entries.
+* ``policy_kwargs.net_arch``: a list (or a ``pi``/``vf`` (PPO), ``pi``/``qf`` (SAC)
+  mapping) of at most 8 layers, each 1 to 4096 units wide, and at most 20,000,000
+  parameters in the networks the policy builds (about 80 MB of float32).
 """
 
 from __future__ import annotations
@@ -41,6 +58,8 @@ import numpy as np
 from ..common.features import FeatureSpec
 from ..common.jsonio import sha256_file, to_jsonable
 from ..hybrids.residual_spec import ResidualSpec
+from .agent_values import ValueProblem, check_values
+from .folder_paths import FolderFileError, file_inside
 from .policy_json import (
     PolicyJsonError,
     float_array,
@@ -53,7 +72,7 @@ from .policy_json import (
 
 __all__ = ["AgentLoadError", "ObsNormalization", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT",
            "FORMAT_VERSION", "ALGOS", "save_agent", "load_agent", "is_unit", "recorded_spec",
-           "normalization_of"]
+           "normalization_of", "checked_file"]
 
 AGENT_FILE = "agent.json"
 WEIGHTS_FILE = "policy.safetensors"
@@ -75,6 +94,20 @@ _REQUIRED = ("format", "format_version", "algo", "policy_class", "policy_kwargs"
 
 class AgentLoadError(ValueError):
     """An agent folder or file is missing, incomplete, corrupt or in a refused format."""
+
+
+def checked_file(root, path) -> Path:
+    """``path`` if it is a regular file inside ``root`` (:func:`.folder_paths.file_inside`).
+
+    Raises
+    ------
+    AgentLoadError
+        Naming the file, when it leads outside ``root`` or is not a regular file.
+    """
+    try:
+        return file_inside(root, path)
+    except FolderFileError as exc:
+        raise AgentLoadError(str(exc)) from None
 
 
 @dataclass(frozen=True)
@@ -265,6 +298,10 @@ def load_agent(path):
     path = Path(path)
     meta_path = path / AGENT_FILE
     meta = _read_meta(path)
+    try:
+        check_values(meta, meta_path)
+    except ValueProblem as exc:
+        raise AgentLoadError(str(exc)) from None
     weights = _checked_weights(path, meta)
     try:
         obs_space = space_from_json(meta["observation_space"],
@@ -301,6 +338,8 @@ def load_agent(path):
 def _read_meta(path: Path) -> dict:
     """``agent.json`` of ``path``, checked for its format, version and entries."""
     meta_path = path / AGENT_FILE
+    if meta_path.exists():
+        checked_file(path, meta_path)
     if not meta_path.is_file():
         raise AgentLoadError(f"{path} is not an agent folder: {AGENT_FILE} is missing")
     try:
@@ -334,6 +373,8 @@ def _checked_weights(path: Path, meta: dict) -> Path:
         raise AgentLoadError(f"{meta_path}: weights module {info['module']!r} does not "
                              f"fit {algo.upper()} (expected {_WEIGHTS_MODULE[algo]!r})")
     weights = path / Path(str(info["file"])).name
+    if weights.exists():
+        checked_file(path, weights)
     if not weights.is_file():
         raise AgentLoadError(f"agent {path} is incomplete: weights file {weights.name} is missing")
     if sha256_file(weights) != info["sha256"]:

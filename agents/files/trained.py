@@ -20,7 +20,7 @@ import numpy as np
 
 from ..common.features import FeatureSpec, add_features
 from .mlp import NumpyMLP
-from .pickled import PICKLED_MODEL_FILES, load_pickled_run, run_features, run_hybrid
+from .pickled import is_pickled_run, load_pickled_run, run_features, run_hybrid
 from .run_folder import CONFIG_FILE, FINAL_AGENT_DIR, read_config, seed_runs
 from .safe_format import (
     AGENT_FILE,
@@ -155,7 +155,8 @@ class TrainedAgent:
             Safe agent folder (``agent.json`` + ``policy.safetensors``), a ``train.py`` run
             folder (its best agent, else ``final_agent/``) or the ``agent.json`` file.
             With ``allow_pickle=True`` also a run folder or model ``.zip`` holding only
-            stable-baselines3's pickled files.
+            stable-baselines3's pickled files, of ``train.py`` or of rl-baselines3-zoo
+            (``logs/ppo/tether_gym-TetherLibration-v1_1``; :mod:`.zoo_folder`).
         algo : str or None
             Only for pickled run folders whose ``config.yml`` lacks the algorithm.
         allow_pickle : bool
@@ -182,9 +183,10 @@ class TrainedAgent:
         if path.is_file() and path.suffix not in (".zip", ".pkl"):
             raise AgentLoadError(f"{path} is not an agent file: give an agent folder "
                                  f"({AGENT_FILE} + {WEIGHTS_FILE}) or a run folder")
-        if path.is_dir() and not any((path / f).is_file() for f in PICKLED_MODEL_FILES):
+        if path.is_dir() and not is_pickled_run(path):
             raise AgentLoadError(f"no agent in {path}: no {AGENT_FILE} (nor "
-                                 f"{'/, '.join(RUN_AGENT_DIRS)}/ holding one)")
+                                 f"{'/, '.join(RUN_AGENT_DIRS)}/ holding one), no pickled "
+                                 "model of train.py or rl_zoo3")
         run = load_pickled_run(path, allow_pickle=allow_pickle, algo=algo)
         cfg = run.config
         return cls(run.model.policy, run.norm, name=f"{run.algo}:{run.run_dir.name}",
