@@ -39,6 +39,7 @@ from .registry import (
     default_policies,
     make_policy,
     resolve_policy,
+    trained_on,
 )
 from .rollout import Trajectory, rollout
 from .scenarios import Scenario, get_suite
@@ -242,14 +243,23 @@ def _prepare(settings: list[_Setting], specs: list[PolicySpec], scenarios, env_k
              seeds: list[int]) -> None:
     """Build every scenario's env into ``settings``, then check every policy run on it.
 
-    All of it happens before any episode runs.
+    All of it happens before any episode runs. Every scenario is built for the chain and
+    task the trained agents were trained on (:func:`~.registry.trained_on`, under the
+    scenario's own arguments), for the number of bodies it gets
+    (:meth:`~.scenarios.Scenario.resolved`), with ``env_kwargs`` on top.
 
     Raises ValueError naming the scenario, the policy and what does not fit.
     """
     for spec in specs:
         spec.load()
+    base = trained_on(specs, env_kwargs)
     for sc in scenarios:
-        st = _Setting(sc, sc.env_kwargs_with(env_kwargs))
+        try:
+            resolved, kwargs = sc.resolved(env_kwargs, base)
+        except ValueError as exc:
+            raise ValueError(f"{exc} (trained-on env arguments {base})" if base
+                             else str(exc)) from None
+        st = _Setting(resolved, kwargs)
         settings.append(st)
         for spec in specs:
             try:

@@ -49,7 +49,8 @@ from .scenarios import Scenario
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
            "registered_policies", "resolve_policy", "make_policy", "default_policies",
            "shipped_agents", "load_plugins", "BASELINES", "HANDOVER", "HANDOVER_OF",
-           "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS"]
+           "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS", "TRAINED_ON_KEYS",
+           "trained_on"]
 
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
@@ -62,6 +63,10 @@ ACTION_KEYS = ("action_mode", "increment_gain")
 """Env arguments that define what a policy's action means."""
 OBSERVATION_KEYS = ("observe_params",)
 """Env arguments that define what a policy's observation holds."""
+TRAINED_ON_KEYS = ("n_bodies", "amplitude", "frequency", "control_step")
+"""Env arguments that define the chain and the task a trained agent was trained on: an
+evaluation runs every scenario, for every policy, with the values its agents recorded
+(under the scenario's own arguments and ``--env-kwargs``; see :func:`trained_on`)."""
 _NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_.+\-]*\Z")
 
 
@@ -302,6 +307,75 @@ def _residual_env_kwargs(name: str, agents: list) -> dict:
 def _handover_env_kwargs(name: str, agents: list) -> dict:
     """A handover hybrid commands reel rates; its env gives its agent's observation."""
     return {**_rate_mode(), **_recorded(name, agents, OBSERVATION_KEYS)}
+
+
+def _default_n_bodies() -> int:
+    from tether_gym.envs import EnvConfig
+
+    return EnvConfig.from_kwargs().n_bodies
+
+
+def _recorded_by_agent(specs: list) -> dict[str, dict]:
+    """``{policy name: {key: value}}`` of :data:`TRAINED_ON_KEYS` each agent recorded.
+
+    A missing ``n_bodies`` is the env's default; the runs of one policy must agree.
+    """
+    n_default = _default_n_bodies()
+    recorded = {}
+    for spec in specs:
+        if spec.form is None:
+            continue
+        spec.load()
+        values = _recorded(spec.name, spec.agents, TRAINED_ON_KEYS)
+        recorded[spec.name] = {"n_bodies": n_default, **values}
+    return recorded
+
+
+def trained_on(specs: list, overrides: Mapping | None = None) -> dict:
+    """The env arguments of :data:`TRAINED_ON_KEYS` the trained agents of ``specs`` share.
+
+    An evaluation builds every scenario's env on top of them, so that an agent trained
+    with ``--env-kwargs n_bodies=4 amplitude=0.3`` is evaluated, beside the baselines
+    (which run on any N), on the chain and task it was trained on. A key given in
+    ``overrides`` (``--env-kwargs``) is left out (what the user types wins).
+
+    Raises
+    ------
+    ValueError
+        When the agents were trained on different values of a key that ``overrides``
+        does not set, or when an agent cannot run on the requested ``n_bodies`` (its
+        network is sized for its own N); the message names the policy, the N it was
+        trained on and the N asked for.
+    """
+    overrides = dict(overrides or {})
+    recorded = _recorded_by_agent(specs)
+    base: dict = {}
+    for key in TRAINED_ON_KEYS:
+        if key in overrides:
+            continue
+        values = {name: rec.get(key) for name, rec in recorded.items()}
+        distinct = {repr(v) for v in values.values()}
+        if len(distinct) > 1:
+            given = ", ".join(f"{name!r} {'the default' if v is None else v}"
+                              for name, v in values.items())
+            fix = ("a network runs only on the chain it was trained on" if key == "n_bodies"
+                   else f"or give --env-kwargs {key}=VALUE to run all of them on one")
+            raise ValueError(f"the policies were trained on different {key}: {given}; "
+                             f"evaluate them in separate calls ({fix})")
+        if values and next(iter(values.values())) is not None:
+            base[key] = next(iter(values.values()))
+    n_bodies = overrides.get("n_bodies", base.get("n_bodies", _default_n_bodies()))
+    for name, rec in recorded.items():
+        if rec["n_bodies"] != n_bodies:
+            raise ValueError(
+                f"policy {name!r} was trained on n_bodies={rec['n_bodies']} "
+                f"({rec['n_bodies'] - 1} tethers) and cannot run on n_bodies={n_bodies!r}: "
+                "its network is sized for its own chain; leave n_bodies out of "
+                f"--env-kwargs to evaluate it on n_bodies={rec['n_bodies']}, or train an "
+                f"agent with train.py --env-kwargs n_bodies={n_bodies!r}")
+    if base.get("n_bodies") == _default_n_bodies():
+        del base["n_bodies"]
+    return base
 
 
 @dataclass(frozen=True)

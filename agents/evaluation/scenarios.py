@@ -15,6 +15,22 @@ Besides the built-in suites (:data:`SUITES`), a suite can be a YAML file::
         nominal: {masses: [1.0, 2.0], eccentricity: 0.2}
 
 read with ``yaml.safe_load`` (no code is executed; lists become tuples).
+
+**Any number of bodies.** Scenarios are written for the env's default chain (the
+paper's, :data:`WRITTEN_FOR` = 3 bodies, 2 tethers); :meth:`Scenario.for_bodies` gives
+the same scenario for any N by one rule per kind of per-tether value (:func:`per_tether`):
+
+* ``masses`` (the env's and the nominal model's): each tether's mass as a factor of
+  the env's default masses for the written N, the factors cycled over the N-1 tethers and
+  applied to the default masses for N. The ``mismatch`` scenario's true masses
+  (1.2, 1.6) = (1.2, 0.8) x the default (1, 2) become (1.2, 0.8, 1.2) x (1, 1, 1) at
+  N = 4, its nominal (1, 2) the default (1, 1, 1);
+* any other per-tether tuple (``initial_theta``) whose entries are all equal: the same
+  entry on every tether; an unequal one written for another N is a ValueError naming
+  the scenario, the key and N.
+
+A value already of N-1 entries is kept, so at N = 3 every built-in scenario is exactly
+the one written above.
 """
 
 from __future__ import annotations
@@ -23,14 +39,63 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["Scenario", "SUITES", "get_suite", "load_suite_file", "describe_suites",
-           "RANDOM_INIT", "PAPER_SCENARIO"]
+           "RANDOM_INIT", "PAPER_SCENARIO", "WRITTEN_FOR", "per_tether", "default_masses"]
+
+WRITTEN_FOR = 3
+"""The number of bodies the built-in scenarios are written for (the env's default)."""
 
 RANDOM_INIT = {"initial_theta": (0.0, 0.0), "init_theta_range": 0.15, "init_dtheta_range": 0.1}
 """theta_i(0) uniform in +-0.15 rad, theta_i'(0) within +-0.1 of the reference rate."""
 
 
-PER_TETHER_KEYS = ("initial_theta",)
-"""Scenario arguments with one entry per tether (see :meth:`Scenario.env_kwargs_with`)."""
+PER_TETHER_KEYS = ("initial_theta", "masses")
+"""Scenario arguments with one entry per tether (see :func:`per_tether`)."""
+
+
+def default_masses(n_bodies: int) -> tuple[float, ...]:
+    """The env's default subsatellite masses for ``n_bodies`` bodies (one per tether)."""
+    from tether_gym.envs import EnvConfig
+
+    return tuple(EnvConfig.from_kwargs(n_bodies=n_bodies).chain.masses)
+
+
+def per_tether(key: str, value, n_bodies: int, where: str = "scenario"):
+    """``value`` of the per-tether argument ``key`` for a chain of ``n_bodies`` bodies.
+
+    A tuple of ``n_bodies - 1`` entries (or anything that is not a non-empty tuple) is
+    returned as it is. ``masses`` written for ``len(value) + 1`` bodies keep each
+    tether's factor over the env's default masses for that N, cycled over the tethers
+    and applied to the default masses for ``n_bodies``; other tuples must have equal
+    entries, which every tether then gets.
+
+    Raises
+    ------
+    ValueError
+        For an unequal tuple (not ``masses``) written for another N; the message names
+        ``where``, ``key``, the value and ``n_bodies``.
+    """
+    n = n_bodies - 1
+    if not isinstance(value, tuple) or not value or len(value) == n:
+        return value
+    if key == "masses":
+        written = default_masses(len(value) + 1)
+        factors = [float(v) / w for v, w in zip(value, written, strict=True)]
+        target = default_masses(n_bodies)
+        return tuple(target[i] * factors[i % len(factors)] for i in range(n))
+    if all(v == value[0] for v in value):
+        return (value[0],) * n
+    raise ValueError(f"{where}: {key}={value!r} has {len(value)} entries with different "
+                     f"values, written for {len(value) + 1} bodies; it has no rule for "
+                     f"n_bodies={n_bodies} ({n} tethers): give {key} with {n} entries in "
+                     "--env-kwargs or the suite file")
+
+
+def _n_bodies(kwargs: dict) -> int | None:
+    """``kwargs['n_bodies']`` when it is a valid int (the env checks it otherwise), else None."""
+    n = kwargs.get("n_bodies", WRITTEN_FOR)
+    if isinstance(n, int) and not isinstance(n, bool) and n >= 2:
+        return n
+    return None
 
 
 @dataclass(frozen=True)
@@ -55,23 +120,51 @@ class Scenario:
     env_kwargs: dict = field(default_factory=dict)
     nominal: dict | None = None
 
-    def env_kwargs_with(self, overrides: dict | None = None) -> dict:
+    def env_kwargs_with(self, overrides: dict | None = None, base: dict | None = None) -> dict:
         """The scenario's env arguments with ``overrides`` (``--env-kwargs``) on top.
 
-        When ``overrides`` sets ``n_bodies``, a per-tether tuple of the scenario whose
-        entries are all equal (such as ``initial_theta=(0.0, 0.0)``) is resized to the
-        new number of tethers, so that the suites work for any N.
+        ``base`` (the env the evaluated agents were trained on, such as their
+        ``n_bodies``) lies under the scenario's own arguments. The scenario's per-tether
+        tuples follow the resulting ``n_bodies`` (:func:`per_tether`); the overrides are
+        never changed.
         """
         overrides = dict(overrides or {})
-        merged = {**self.env_kwargs, **overrides}
-        n_bodies = overrides.get("n_bodies")
-        if isinstance(n_bodies, int) and not isinstance(n_bodies, bool) and n_bodies >= 2:
+        merged = {**(base or {}), **self.env_kwargs, **overrides}
+        n_bodies = _n_bodies(merged)
+        if n_bodies is not None:
             for key in PER_TETHER_KEYS:
-                value = merged.get(key)
-                if (key not in overrides and isinstance(value, tuple) and value
-                        and all(v == value[0] for v in value)):
-                    merged[key] = (value[0],) * (n_bodies - 1)
+                if key in merged and key not in overrides:
+                    merged[key] = per_tether(key, merged[key], n_bodies,
+                                             f"scenario {self.name!r}")
         return merged
+
+    def for_bodies(self, n_bodies: int | None) -> Scenario:
+        """The same scenario for a chain of ``n_bodies`` bodies (itself when nothing changes).
+
+        Its per-tether env arguments and its nominal model's masses follow
+        :func:`per_tether`; None (an invalid N, which the env then reports) keeps it.
+        """
+        if n_bodies is None:
+            return self
+        where = f"scenario {self.name!r}"
+        env_kwargs = {key: per_tether(key, value, n_bodies, where) if key in PER_TETHER_KEYS
+                      else value for key, value in self.env_kwargs.items()}
+        nominal = self.nominal
+        if nominal is not None and "masses" in nominal:
+            nominal = {**nominal, "masses": per_tether("masses", tuple(nominal["masses"]),
+                                                       n_bodies, f"{where}, nominal")}
+        if env_kwargs == self.env_kwargs and nominal == self.nominal:
+            return self
+        return Scenario(self.name, self.description, env_kwargs, nominal)
+
+    def resolved(self, overrides: dict | None = None,
+                 base: dict | None = None) -> tuple[Scenario, dict]:
+        """The scenario for the N its env gets, and that env's arguments.
+
+        ``overrides`` and ``base`` as in :meth:`env_kwargs_with`.
+        """
+        kwargs = self.env_kwargs_with(overrides, base)
+        return self.for_bodies(_n_bodies(kwargs)), kwargs
 
 
 PAPER_SCENARIO = Scenario("paper",

@@ -191,7 +191,9 @@ def test_every_agent_is_checked_before_anything_runs(tmp_path, capsys):
                             "--out", str(tmp_path)])
     captured = capsys.readouterr()
     assert code == 2
-    assert "'ppo'" in captured.err and "'paper'" in captured.err
+    # which agent, the N it was trained on and the N asked for
+    assert "'ppo'" in captured.err and "n_bodies=3" in captured.err
+    assert "n_bodies=4" in captured.err
     assert "[1/" not in captured.out  # smc did not run first
     assert not (tmp_path / "results.json").exists()
 
