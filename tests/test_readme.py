@@ -164,3 +164,13 @@ def test_the_cheap_readme_commands_run_as_printed(tmp_path, monkeypatch):
 def test_commands_are_read_from_fenced_and_indented_blocks(text):
     assert readme_commands(text + "prose: python evaluate.py ppo\n") == [
         "python evaluate.py smc runs/x"]
+
+
+def test_the_safety_filter_wrapper_example_runs(capsys):
+    readme = README.read_text()
+    section = readme[readme.index("**Safety filter as a wrapper.**"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme_example"})
+    active, correction, feasible = capsys.readouterr().out.split()
+    assert active in ("True", "False") and float(correction) >= 0.0
+    assert feasible in ("True", "False")
