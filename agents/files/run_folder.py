@@ -13,7 +13,8 @@ export and the evaluation use its names and functions. A run folder
 ``agent.json``,                the best agent in the safe format
 ``policy.safetensors``         (:mod:`tether_gym_agents.files.safe_format`)
 ``final_agent/``               the agent at the last step, in the same format
-``eval/evaluations.npz``       the evaluations (stable-baselines3's ``EvalCallback``)
+``eval/evaluations.npz``       the evaluations (stable-baselines3's layout, plus
+                               ``episodes``: see :func:`evaluation_arrays`)
 ``learning_curve.png``         their plot
 ``tb/``                        TensorBoard
 ``train.log``                  what a seed of the fan-out printed
@@ -26,9 +27,24 @@ export and the evaluation use its names and functions. A run folder
 =============================  =======================================================
 
 A folder of seed runs (``train.py --seeds N --out FOLDER``) holds ``seed_K/`` run
-folders, ``fanout.log`` and ``learning_curves.png``. The JSON, YAML and text files are
-written atomically (a temporary name, then ``os.replace``): a kill leaves the old
-file or the new one, never a piece.
+folders, ``fanout.log`` and ``learning_curves.png``.
+
+Every file of a run is written atomically (a temporary name beside it, then
+``os.replace``; :func:`write_text_atomic` for JSON, YAML and text, :func:`atomic_target`
+for the rest: npz, the saved models, statistics, buffers, safe agents, plots): a kill
+leaves the old file or the new one, never a piece. A file damaged otherwise is
+reported with its path (:class:`DamagedFileError`), and a resumed run falls back to
+what is intact (an older checkpoint, a new evaluation history).
+
+Wall time. ``train_info.json`` is written when a call of ``train.py`` starts (before
+its envs and model are built), then every ``PROGRESS_EVERY_S`` seconds and at the
+end; each record holds ``wall_time_s`` (all calls so far) and ``updated_at`` (the
+Unix time of the record [s]). A call killed between two records is not lost: when
+the run is resumed and the record's ``status`` is not ``finished``, the time from
+``updated_at`` to the newest file the killed call wrote (TensorBoard events,
+evaluations, checkpoints: :func:`last_write_time`) is added to ``wall_time_s``, up to
+ten minutes (``training.run.UNRECORDED_MAX_S``: a folder copied without its
+modification times adds no more).
 """
 
 from __future__ import annotations
@@ -36,6 +52,9 @@ from __future__ import annotations
 import json
 import os
 import re
+import zipfile
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,7 +67,9 @@ __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_
            "EVALUATIONS_FILE", "LEARNING_CURVE_FILE", "TB_DIR", "FINAL_AGENT_DIR",
            "BEST_MODEL_FILE", "FINAL_MODEL_FILE", "VECNORMALIZE_FILE", "REPLAY_BUFFER_FILE",
            "CHECKPOINT_DIR", "CHECKPOINT_PREFIX", "TRAIN_LOG_FILE", "SEED_CURVES_FILE",
-           "FANOUT_LOG_FILE", "SavedModel", "write_text_atomic", "yaml_text", "write_train_info",
+           "FANOUT_LOG_FILE", "SavedModel", "DamagedFileError", "atomic_target",
+           "last_write_time", "evaluation_arrays", "evaluation_rows", "write_text_atomic",
+           "yaml_text", "write_train_info",
            "read_train_info", "trained_steps", "write_config", "read_config", "write_args",
            "append_command", "evaluations_path", "read_evaluations", "write_evaluations",
            "saved_models", "checkpoint_steps", "seed_dir", "seed_runs"]
@@ -79,12 +100,48 @@ _SEED_DIR = re.compile(r"seed_(\d+)\Z")
 _STEPS_IN_NAME = re.compile(r"_(\d+)_steps")
 
 
+class DamagedFileError(ValueError):
+    """A run file that exists but cannot be read (cut short, or not what it should hold)."""
+
+
 def write_text_atomic(path: Path, text: str) -> None:
     """Write ``text`` to ``path`` through a temporary file and ``os.replace``."""
     path = Path(path)
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(text)
     os.replace(tmp, path)
+
+
+@contextmanager
+def atomic_target(path: Path) -> Iterator[Path]:
+    """A temporary path to write ``path``'s content to; renamed onto ``path`` on success.
+
+    The temporary name is hidden (``.tmp-<pid>-<name>``, same folder, same suffix, so
+    writers that add a suffix leave it alone and the checkpoint globs do not see it);
+    it is removed when the write fails.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def last_write_time(run: Path) -> float:
+    """The newest modification time of any file in a run folder (Unix time [s]); 0 if none.
+
+    Estimates when a killed call stopped writing (see the module's "Wall time").
+    """
+    newest = 0.0
+    for path in Path(run).rglob("*"):
+        try:
+            if path.is_file():
+                newest = max(newest, path.stat().st_mtime)
+        except OSError:
+            continue
+    return newest
 
 
 def yaml_text(data) -> str:
@@ -162,27 +219,94 @@ def evaluations_path(run: Path) -> Path:
     return Path(run) / EVALUATIONS_FILE
 
 
+_EVAL_KEYS = ("timesteps", "results", "ep_lengths")
+
+
 def read_evaluations(run: Path) -> dict[str, np.ndarray] | None:
     """The arrays of ``eval/evaluations.npz``; None when the run has none.
 
-    ``timesteps``, ``results``, ``ep_lengths`` and, when recorded, ``successes``.
+    ``timesteps``, ``results``, ``ep_lengths`` and, when recorded, ``successes`` and
+    ``episodes`` (see :func:`evaluation_arrays`).
+
+    Raises
+    ------
+    DamagedFileError
+        When the file is not a readable npz (cut short) or lacks one of the arrays
+        ``timesteps``, ``results``, ``ep_lengths``, or their lengths differ; the
+        message names the file.
     """
     path = evaluations_path(run)
     if not path.is_file():
         return None
-    with np.load(path) as data:
-        return {k: data[k] for k in data.files}
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
+        raise DamagedFileError(f"{path}: damaged ({type(exc).__name__}: {exc})") from None
+    missing = [k for k in _EVAL_KEYS if k not in arrays]
+    if missing:
+        raise DamagedFileError(f"{path}: damaged (no {', '.join(missing)}; it holds "
+                               f"{sorted(arrays)})")
+    if len({len(arrays[k]) for k in _EVAL_KEYS}) != 1:
+        raise DamagedFileError(f"{path}: damaged (timesteps, results and ep_lengths hold "
+                               f"{[len(arrays[k]) for k in _EVAL_KEYS]} evaluations)")
+    return arrays
 
 
 def write_evaluations(run: Path, arrays: dict[str, np.ndarray]) -> None:
     """Write ``eval/evaluations.npz`` (atomically)."""
     path = evaluations_path(run)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
     named: dict[str, Any] = dict(arrays)  # (numpy's stubs confuse a key with allow_pickle)
-    with open(tmp, "wb") as fh:
+    with atomic_target(path) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **named)
-    os.replace(tmp, path)
+
+
+def _padded(rows: Sequence[Sequence[float]]) -> np.ndarray:
+    """Rows of any lengths as one array; shorter rows padded with NaN (float then)."""
+    width = max((len(r) for r in rows), default=0)
+    if all(len(r) == width for r in rows):
+        return np.array(rows).reshape(len(rows), width)
+    table = np.full((len(rows), width), np.nan)
+    for i, row in enumerate(rows):
+        table[i, :len(row)] = row
+    return table
+
+
+def evaluation_arrays(timesteps: list[int], results: list[list[float]],
+                      lengths: list[list[int]], successes: list[list[bool]] | None = None
+                      ) -> dict[str, np.ndarray]:
+    """The arrays of ``eval/evaluations.npz`` for evaluations of any episode counts.
+
+    ``results[i]`` and ``lengths[i]`` are the returns [-] and lengths [steps] of the
+    episodes of the evaluation at ``timesteps[i]``. As stable-baselines3 stores them,
+    one row per evaluation; when the counts differ (a run resumed with another
+    ``--eval-episodes``) the shorter rows are padded with NaN, and ``episodes`` (always
+    written) holds each row's count. :func:`evaluation_rows` reads them back.
+    """
+    arrays = {"timesteps": np.asarray(timesteps, dtype=np.int64).reshape(-1),
+              "results": _padded(results), "ep_lengths": _padded(lengths),
+              "episodes": np.array([len(r) for r in results], dtype=np.int64)}
+    if successes:
+        arrays["successes"] = _padded(successes)
+    return arrays
+
+
+def evaluation_rows(arrays: dict[str, np.ndarray]) -> dict[str, list[list]]:
+    """Each evaluation's own episodes from :func:`evaluation_arrays` (padding removed).
+
+    Returns ``{"results": [...], "ep_lengths": [...]}`` (and ``"successes"`` when
+    recorded), one list per evaluation; a file without ``episodes`` (written by
+    stable-baselines3 itself) has full rows.
+    """
+    n = len(arrays["timesteps"])
+    counts = arrays.get("episodes", np.full(n, arrays["results"].shape[1] if n else 0))
+    rows: dict[str, list[list]] = {}
+    for key in ("results", "ep_lengths", "successes"):
+        if key in arrays:
+            cast = bool if key == "successes" else (int if key == "ep_lengths" else float)
+            rows[key] = [[cast(v) for v in arrays[key][i, :int(counts[i])]] for i in range(n)]
+    return rows
 
 
 # ---------------------------------------------------------------------- saved models

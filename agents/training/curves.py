@@ -9,6 +9,7 @@ import numpy as np
 from ..files.run_folder import (
     LEARNING_CURVE_FILE,
     SEED_CURVES_FILE,
+    atomic_target,
     evaluations_path,
     read_evaluations,
     seed_runs,
@@ -21,7 +22,8 @@ def plot_learning_curve(run_dir: Path) -> Path | None:
     """Write ``learning_curve.png`` from ``eval/evaluations.npz``; None without matplotlib.
 
     Mean evaluation return (with min-max band) and mean episode length against env
-    steps, as recorded by the evaluation callback.
+    steps, as recorded by the evaluation callback (rows of different episode counts
+    are NaN-padded: the statistics skip the padding).
     """
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
@@ -35,16 +37,18 @@ def plot_learning_curve(run_dir: Path) -> Path | None:
     fig = Figure(figsize=(7, 4.5), layout="constrained")
     FigureCanvasAgg(fig)
     ax, ax_len = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
-    ax.plot(steps, returns.mean(axis=1), label="mean")
-    ax.fill_between(steps, returns.min(axis=1), returns.max(axis=1), alpha=0.3, label="min-max")
+    ax.plot(steps, np.nanmean(returns, axis=1), label="mean")
+    ax.fill_between(steps, np.nanmin(returns, axis=1), np.nanmax(returns, axis=1), alpha=0.3,
+                    label="min-max")
     ax.set_ylabel("evaluation return")
     ax.set_title(f"{Path(run_dir).name}: deterministic evaluation episodes")
     ax.legend()
-    ax_len.plot(steps, lengths.mean(axis=1))
+    ax_len.plot(steps, np.nanmean(lengths, axis=1))
     ax_len.set_ylabel("episode length")
     ax_len.set_xlabel("env steps")
     out = Path(run_dir) / LEARNING_CURVE_FILE
-    fig.savefig(out, dpi=100)
+    with atomic_target(out) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
     return out
 
 
@@ -67,7 +71,7 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     for run in seed_runs(folder):
         data = read_evaluations(run)
         if data is not None:
-            curves[run.name] = (data["timesteps"], data["results"].mean(axis=1))
+            curves[run.name] = (data["timesteps"], np.nanmean(data["results"], axis=1))
     if len(curves) < 2:
         return None
     common = sorted(set.intersection(*(set(t.tolist()) for t, _ in curves.values())))
@@ -88,5 +92,6 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     ax.set_ylabel("mean evaluation return")
     ax.set_title(f"{Path(folder).name}: deterministic evaluation episodes, every seed")
     out = Path(folder) / SEED_CURVES_FILE
-    fig.savefig(out, dpi=100)
+    with atomic_target(out) as tmp:
+        fig.savefig(tmp, dpi=100, format="png")
     return out

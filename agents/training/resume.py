@@ -18,6 +18,8 @@ import numpy as np
 from ..files.run_folder import (
     FINAL_MODEL_FILE,
     SavedModel,
+    evaluation_arrays,
+    evaluation_rows,
     read_evaluations,
     saved_models,
     write_evaluations,
@@ -98,23 +100,32 @@ def continue_eval_history(callback, run_dir: Path, last_step: int) -> int:
     """Seed an EvalCallback with the evaluations up to ``last_step``; drop later ones.
 
     Evaluations after the resume point were made by the interrupted part of the run,
-    which the resumed run repeats; the file is rewritten without them. Returns the
-    number dropped.
+    which the resumed run repeats; the file is rewritten without them. Each
+    evaluation keeps its own episode count (the resumed run may use another
+    ``--eval-episodes``). Returns the number dropped.
+
+    Raises
+    ------
+    DamagedFileError
+        When ``eval/evaluations.npz`` cannot be read (its path is in the message).
     """
     arrays = read_evaluations(run_dir)
     if arrays is None:
         return 0
-    keep = arrays["timesteps"] <= last_step
-    dropped = int((~keep).sum())
+    rows = evaluation_rows(arrays)
+    keep = [i for i, t in enumerate(arrays["timesteps"]) if t <= last_step]
+    dropped = len(arrays["timesteps"]) - len(keep)
+    callback.evaluations_timesteps = [int(arrays["timesteps"][i]) for i in keep]
+    callback.evaluations_results = [rows["results"][i] for i in keep]
+    callback.evaluations_length = [rows["ep_lengths"][i] for i in keep]
+    callback.evaluations_successes = [rows["successes"][i] for i in keep
+                                      if "successes" in rows]
     if dropped:
-        write_evaluations(run_dir, {k: v[keep] for k, v in arrays.items()})
-    callback.evaluations_timesteps = [int(t) for t in arrays["timesteps"][keep]]
-    callback.evaluations_results = [list(r) for r in arrays["results"][keep]]
-    callback.evaluations_length = [list(r) for r in arrays["ep_lengths"][keep]]
-    if "successes" in arrays:
-        callback.evaluations_successes = [list(r) for r in arrays["successes"][keep]]
+        write_evaluations(run_dir, evaluation_arrays(
+            callback.evaluations_timesteps, callback.evaluations_results,
+            callback.evaluations_length, callback.evaluations_successes))
     # best_model.zip may come from a dropped evaluation: keep its score as the bar
-    returns = [float(np.mean(r)) for r in arrays["results"]]
+    returns = [float(np.mean(r)) for r in rows["results"] if r]
     if returns:
         callback.best_mean_reward = max(returns)
     return dropped

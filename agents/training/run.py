@@ -11,6 +11,7 @@ from __future__ import annotations
 import copy
 import json
 import shlex
+import sys
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -22,9 +23,12 @@ from ..files.run_folder import (
     FINAL_MODEL_FILE,
     REPLAY_BUFFER_FILE,
     TB_DIR,
+    TRAIN_INFO_FILE,
     VECNORMALIZE_FILE,
+    DamagedFileError,
     append_command,
     evaluations_path,
+    last_write_time,
     read_train_info,
     write_args,
     write_config,
@@ -98,7 +102,14 @@ def train(settings: TrainSettings) -> RunSummary:
     import torch
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from .callbacks import make_callbacks, save_safe_agent
+    from .callbacks import (
+        RunClock,
+        make_callbacks,
+        save_buffer,
+        save_model,
+        save_safe_agent,
+        save_stats,
+    )
     from .curves import plot_learning_curve
 
     # SB3 may add entries to the hyperparameters' mappings (SAC: policy_kwargs.use_sde):
@@ -110,11 +121,12 @@ def train(settings: TrainSettings) -> RunSummary:
     print(f"env {settings.env_id} with env kwargs {json.dumps(settings.env_kwargs)}")
     for note in settings.notes:
         print(f"  note: {note}")
-    previous = read_train_info(out) if settings.resume else {}
+    previous = _previous_info(out) if settings.resume else {}
+    clock = RunClock(settings, _previous_wall(out, previous))
+    clock.write("running", int(previous.get("num_timesteps", 0)))
     model, venv, eval_env = _model(settings)
     _write_records(settings)
-    callbacks = make_callbacks(settings, eval_env, float(previous.get("wall_time_s", 0.0)),
-                               hasattr(model, "replay_buffer"))
+    callbacks = make_callbacks(settings, eval_env, clock, hasattr(model, "replay_buffer"))
     if settings.resume:  # the learning curve continues, not restarts
         _continue_curve(callbacks.evaluator, out, int(model.num_timesteps))
     t0 = time.perf_counter()
@@ -122,12 +134,12 @@ def train(settings: TrainSettings) -> RunSummary:
                 progress_bar=not settings.options.no_progress,
                 reset_num_timesteps=not settings.resume, tb_log_name=settings.algo)
     wall = time.perf_counter() - t0
-    model.save(out / FINAL_MODEL_FILE)
     env = model.get_env()
     if isinstance(env, VecNormalize):
-        env.save(str(out / VECNORMALIZE_FILE))
+        save_stats(env, out / VECNORMALIZE_FILE)
     if hasattr(model, "replay_buffer"):
-        model.save_replay_buffer(out / REPLAY_BUFFER_FILE)
+        save_buffer(model, out / REPLAY_BUFFER_FILE)
+    save_model(model, out / FINAL_MODEL_FILE)  # last: a final model has its other files
     save_safe_agent(settings, model, env, FINAL_AGENT_DIR)
     total_wall = callbacks.progress.write("finished")
     plot_learning_curve(out)
@@ -142,6 +154,39 @@ def train(settings: TrainSettings) -> RunSummary:
 def evaluate_command(out: Path) -> str:
     """The evaluate command a finished run prints, quoted for a POSIX shell."""
     return "`" + shlex.join(["python", "evaluate.py", "smc", str(out)]) + "`"
+
+
+UNRECORDED_MAX_S = 600.0
+"""The most a killed call's time after its last record adds on resume [s] (a folder
+copied without its modification times must not add the copy's age)."""
+
+
+def _previous_info(out: Path) -> dict:
+    """``train_info.json`` of the run being resumed; ``{}`` (with a warning) if damaged."""
+    try:
+        info = read_train_info(out)
+    except ValueError as exc:
+        print(f"warning: {out / TRAIN_INFO_FILE} is damaged ({exc}); the wall time of the "
+              "earlier calls is lost, the run continues", file=sys.stderr)
+        return {}
+    return info if isinstance(info, dict) else {}
+
+
+def _previous_wall(out: Path, previous: dict) -> float:
+    """Wall time of the earlier calls [s], with the killed part after the last record.
+
+    A call that did not finish (``status`` not ``finished``) ran on until the newest
+    file it wrote; that time since its last record (``updated_at``) counts too, up to
+    :data:`UNRECORDED_MAX_S`.
+    """
+    try:
+        wall = float(previous.get("wall_time_s", 0.0))
+        if previous.get("status") != "finished" and "updated_at" in previous:
+            unrecorded = last_write_time(out) - float(previous["updated_at"])
+            wall += min(max(0.0, unrecorded), UNRECORDED_MAX_S)
+    except (TypeError, ValueError):
+        return 0.0
+    return wall
 
 
 def _model(settings: TrainSettings):
@@ -199,9 +244,17 @@ def _continue_curve(evaluator, out: Path, step: int) -> None:
     """Seed the evaluator with the run's evaluations up to ``step``; report dropped ones."""
     from .resume import continue_eval_history
 
-    if not evaluations_path(out).is_file():
+    path = evaluations_path(out)
+    if not path.is_file():
         return
-    dropped = continue_eval_history(evaluator, out, step)
+    try:
+        dropped = continue_eval_history(evaluator, out, step)
+    except DamagedFileError as exc:
+        aside = path.with_name(path.name + ".damaged")
+        path.replace(aside)
+        print(f"warning: {exc}; moved to {aside.name}, the evaluation history starts anew",
+              file=sys.stderr)
+        return
     if dropped:
         print(f"  dropped {dropped} evaluation(s) after step {step} from "
               f"{evaluations_path(out)} (the resumed run repeats those steps)")
