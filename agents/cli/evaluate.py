@@ -44,6 +44,10 @@ NOTES = (
     "The table reports, per policy, the interquartile mean over training runs x "
     "scenarios of each run's mean over its episodes, with a 95 % stratified-bootstrap "
     "interval (2 runs or more) and the probability of improvement over smc.",
+    "Scenarios are defined for any number of bodies (per-tether values follow n_bodies, "
+    "agents/evaluation/scenarios.py). Trained agents run on the n_bodies, amplitude, "
+    "frequency and control_step their agent.json records, for every policy of the call, "
+    "unless --env-kwargs gives them; an agent runs only on the n_bodies it was trained on.",
     "A policy of your own: register it with tether_gym_agents.register_policy(name, "
     "factory, kind=..., env_kwargs=...) and call tether_gym_agents.cli.evaluate.main([name, "
     "...]) or tether_gym_agents.evaluate([name, ...]) (README: Evaluate your own "
@@ -64,8 +68,9 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
                         help="scenario suite: a name below or a YAML suite file (default: "
                              "default)")
     parser.add_argument("--env-kwargs", nargs="+", default=[], metavar="KEY=VALUE",
-                        help="env arguments applied on top of every scenario, as Python "
-                             "literals, e.g. n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
+                        help="env arguments applied on top of every scenario (and over "
+                             "what trained agents were trained on), as Python literals, e.g. "
+                             "n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
     parser.add_argument("--seeds", type=int, default=10,
                         help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
