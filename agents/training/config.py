@@ -20,11 +20,12 @@ from ..common.features import FeatureSpec
 from ..common.jsonio import to_jsonable
 from ..common.obs import with_rate_mode
 from ..hybrids.residual_spec import ResidualSpec
+from .hyperparams import activation_class, check_hyperparams
 
 __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_KEYS",
            "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
-           "check_env_id", "algo_class"]
+           "check_env_id", "algo_class", "check_algo_params", "fit_rollout"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
@@ -62,19 +63,63 @@ def _lin_start(value: str) -> float:
         return math.nan
 
 
-def _check_schedule(key: str, value, source: str) -> None:
-    """Raise ConfigError unless a ``lin_<start>`` value has a positive number after ``lin_``."""
-    if isinstance(value, str):
-        start = _lin_start(value)
-        if not start > 0.0 or not math.isfinite(start):
-            raise ConfigError(f"{source}: {key}: {value!r} must be a number or 'lin_<start>' "
-                              "with a start > 0 (falls linearly to 0 over the run)")
-
-
 def with_schedules(params: dict) -> dict:
-    """``params`` with every ``lin_<start>`` value of :data:`SCHEDULE_KEYS` made a schedule."""
-    return {k: (_linear(_lin_start(v)) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
-            for k, v in params.items()}
+    """``params`` as the algorithm takes them.
+
+    Every ``lin_<start>`` value of :data:`SCHEDULE_KEYS` is made a schedule and
+    ``policy_kwargs.activation_fn`` (a name) the torch class.
+    """
+    out = {k: (_linear(_lin_start(v)) if k in SCHEDULE_KEYS and isinstance(v, str) else v)
+           for k, v in params.items()}
+    kwargs = out.get("policy_kwargs")
+    if isinstance(kwargs, dict) and "activation_fn" in kwargs:
+        out["policy_kwargs"] = {**kwargs,
+                                "activation_fn": activation_class(kwargs["activation_fn"])}
+    return out
+
+
+PPO_DEFAULTS = {"n_steps": 2048, "batch_size": 64}
+"""stable-baselines3's PPO defaults of the rollout's size."""
+
+
+def fit_rollout(params: dict, algo: str, n_envs: int, timesteps: int
+                ) -> tuple[dict, str | None]:
+    """``params`` whose PPO rollout fits in a budget of ``timesteps``, and a note saying so.
+
+    PPO collects ``n_steps * n_envs`` env steps before each update and never stops
+    inside a rollout: a budget below one rollout would train a whole rollout (2048
+    steps for ``--timesteps 64`` with SB3's defaults). Such a run collects rollouts of
+    ``n_steps = ceil(timesteps / n_envs)`` (at least 2 env steps) instead, with
+    ``batch_size`` at most the rollout. SAC (``learning_starts`` at or above the budget:
+    no gradient step) is only noted. Returns ``(params, None)`` when nothing changes.
+    """
+    if algo == "sac":
+        starts = params.get("learning_starts", 100)
+        if isinstance(starts, int) and starts >= timesteps:
+            return params, (f"--timesteps {timesteps} <= learning_starts {starts}: SAC takes no "
+                            "gradient step in this run (it only fills the replay buffer)")
+        return params, None
+    n_steps = params.get("n_steps", PPO_DEFAULTS["n_steps"])
+    if n_steps * n_envs <= timesteps:
+        return params, None
+    fitted = max(math.ceil(timesteps / n_envs), 2 if n_envs == 1 else 1)
+    batch = min(params.get("batch_size", PPO_DEFAULTS["batch_size"]), fitted * n_envs)
+    note = (f"--timesteps {timesteps} is less than one PPO rollout (n_steps {n_steps} x "
+            f"{n_envs} env(s) = {n_steps * n_envs} env steps): this run uses n_steps {fitted}"
+            f" and batch_size {batch} ({fitted * n_envs} env steps per update)")
+    return {**params, "n_steps": fitted, "batch_size": batch}, note
+
+
+def check_algo_params(params: dict, algo: str, source: str) -> None:
+    """Raise ConfigError for the first hyperparameter value PPO/SAC would reject.
+
+    ``params`` are a config's keys as read (``policy`` included); every value is
+    checked before any env or model is built (:mod:`.hyperparams`).
+    """
+    try:
+        check_hyperparams(params, algo, source, params.get("policy"))
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def algo_class(algo: str):
@@ -135,9 +180,7 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
                 raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
     if not isinstance(params.get("env_kwargs") or {}, dict):
         raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
-    for key in SCHEDULE_KEYS:
-        if key in params:
-            _check_schedule(key, params[key], str(path))
+    check_algo_params(params, algo, str(path))
     if "residual" in params:
         residual_spec(params["residual"], str(path))
     if "features" in params:

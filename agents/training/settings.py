@@ -27,9 +27,11 @@ from .config import (
     CONFIG_DIR,
     RUN_KEYS,
     ConfigError,
+    check_algo_params,
     check_env,
     check_env_id,
     feature_spec,
+    fit_rollout,
     load_hyperparams,
     parse_env_kwargs,
     rate_mode_for,
@@ -70,6 +72,7 @@ class TrainOptions:
     config: str | None = None
     out: str | None = None
     resume: bool = False
+    allow_pickle: bool = False
     eval_freq: int | None = None
     eval_episodes: int = 5
     checkpoint_freq: int | None = None
@@ -297,6 +300,7 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
     """
     out = Path(options.out) if options.out is not None else Path("runs") / options.algo
     params, source = _read_params(options, out)
+    check_algo_params(params, options.algo, source)
     run = {k: params.pop(k) for k in RUN_KEYS if k in params}
     if "policy_kwargs" in params and not isinstance(params["policy_kwargs"], dict):
         raise ConfigError(f"{source}: policy_kwargs must be a mapping, not "
@@ -321,6 +325,10 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
               "timesteps": pick(options.timesteps, "n_timesteps", 100_000),
               "eval_freq": pick(options.eval_freq, "eval_freq", 10_000),
               "checkpoint_freq": pick(options.checkpoint_freq, "checkpoint_freq", 100_000)}
+    if not options.resume:
+        params, fitted = fit_rollout(params, options.algo, counts["n_envs"],
+                                     counts["timesteps"])
+        notes += [fitted] if fitted else []
     _check_out(out)
     if residual is not None:
         run["residual"] = residual.to_dict()
