@@ -12,9 +12,12 @@ a seed folder is exactly a single-seed run folder.
 
 Where the tasks run
     By default a new local Ray instance sized to the machine
-    (``num_cpus=os.cpu_count()``, no dashboard), stopped at the end;
+    (``num_cpus=os.cpu_count()``, no dashboard, no token authentication: it is this
+    user's, on this machine), stopped at the end; its processes also end when the
+    driver is killed (``kill -9`` included: :mod:`.ray_reaper`).
     ``--ray-address auto|HOST:PORT`` (or the ``RAY_ADDRESS`` environment variable)
-    connects to an existing cluster instead. Each task asks for ``--torch-threads``
+    connects to an existing cluster instead; an address nothing answers on is an
+    error within :data:`CONNECT_TIMEOUT_S` seconds. Each task asks for ``--torch-threads``
     CPUs (default 1) and runs with that many torch threads and one numba thread
     (``NUMBA_NUM_THREADS=1``, ``OMP_NUM_THREADS=1`` and ``MKL_NUM_THREADS=1``: the
     local workers inherit them, a cluster's get them as the job's runtime
@@ -69,7 +72,7 @@ from .run import train
 from .settings import TrainOptions, TrainSettings, resolve_settings
 
 __all__ = ["RAY_PIP", "RunState", "SeedStatus", "SeedJob", "SeedResult", "run_fanout", "run_jobs",
-           "init_ray", "require_ray", "run_state", "train_seed"]
+           "init_ray", "shutdown_ray", "require_ray", "run_state", "train_seed"]
 
 RAY_PIP = 'pip install "tether_gym[ray]"'
 #: Environment of every Ray task: one numba, OpenMP and MKL thread per run.
@@ -172,39 +175,125 @@ def init_ray(address: str | None = None) -> bool:
     address : str or None
         ``"auto"``, ``"HOST:PORT"`` or ``"ray://HOST:PORT"`` of an existing cluster;
         None uses ``RAY_ADDRESS`` when it is set, else starts a local instance with
-        ``num_cpus=os.cpu_count()`` and no dashboard.
+        ``num_cpus=os.cpu_count()`` and no dashboard (:func:`_start_local`).
+
+    Raises
+    ------
+    ConfigError
+        When the cluster at ``address`` cannot be reached (within
+        :data:`CONNECT_TIMEOUT_S` for a host and port nothing answers on).
     """
     ray = require_ray()
     if ray.is_initialized():
         return False
     address = address or os.environ.get("RAY_ADDRESS") or None
-    quiet = {"logging_level": logging.WARNING, "log_to_driver": False}
-    if address:  # the workers of other nodes get the thread settings as a runtime env
-        try:
-            ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
-        except (ConnectionError, RuntimeError) as exc:
-            raise ConfigError(
-                f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
-                f"({type(exc).__name__}: {str(exc).splitlines()[0]}). Start it with `ray start "
-                f"--head` and give its address; a cluster with token authentication needs its "
-                f"token here too (RAY_AUTH_MODE=token and RAY_AUTH_TOKEN, as on its nodes)"
-            ) from exc
+    if not address:
+        _start_local(ray)
         return True
+    quiet = {"logging_level": logging.WARNING, "log_to_driver": False}
+    try:  # the workers of other nodes get the thread settings as a runtime env
+        _probe(address)
+        ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
+    except (ConnectionError, RuntimeError, OSError) as exc:
+        raise ConfigError(
+            f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
+            f"({type(exc).__name__}: {(str(exc) or 'no answer').splitlines()[0]}). Start it "
+            f"with `ray start --head` and give its address; a cluster with token "
+            f"authentication needs its token here too (RAY_AUTH_MODE=token and RAY_AUTH_TOKEN, "
+            f"as on its nodes)") from exc
+    return True
+
+
+CONNECT_TIMEOUT_S = 10.0
+"""Seconds to wait for a cluster's host and port to accept a connection [s] (Ray itself
+retries an address nothing listens on for minutes, silently)."""
+
+
+def _probe(address: str) -> None:
+    """Raise OSError unless ``HOST:PORT`` (or ``ray://HOST:PORT``) accepts a TCP connection.
+
+    ``auto`` is left to Ray (it reads the address of a cluster on this machine and
+    fails at once when there is none).
+    """
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if address == "auto" or not sep or not port.isdigit():
+        return
+    try:
+        with socket.create_connection((host.strip("[]"), int(port)), CONNECT_TIMEOUT_S):
+            pass
+    except TimeoutError:
+        raise OSError(f"no answer within {CONNECT_TIMEOUT_S:g} s") from None
+    except OSError as exc:
+        raise OSError(exc.strerror or str(exc)) from None
+
+
+#: Environment of the processes of a local instance: the task threads, no
+#: token-authentication banner (no one else connects to it: it listens on this machine).
+LOCAL_ENV = {**TASK_ENV, "RAY_AUTH_MODE": "disabled"}
+
+
+def reaper_folder() -> Path:
+    """Where the local instances' process records are kept (one file per driver)."""
+    import tempfile
+
+    uid = getattr(os, "getuid", lambda: 0)()
+    return Path(tempfile.gettempdir()) / f"tether_gym_ray_{uid}"
+
+
+_WATCHERS: dict[int, object] = {}
+
+
+def _start_local(ray) -> None:
+    """Start a local Ray instance whose processes end with this driver, even on ``kill -9``.
+
+    The processes of a previous local instance whose driver was killed are stopped
+    first (:func:`.ray_reaper.reap_stale`); the new instance's processes are recorded
+    and a watcher process stops them if this driver dies without ``ray.shutdown()``
+    (:mod:`.ray_reaper`).
+    """
+    import subprocess
+
+    from . import ray_reaper
+
+    folder = reaper_folder()
+    stale = ray_reaper.reap_stale(folder)
+    if stale:
+        print(f"stopped {stale} process(es) left by a killed local Ray instance", flush=True)
     # A local instance's workers inherit the environment of the processes ray.init
-    # starts: the same settings without a runtime env, whose set-up was measured to
+    # starts: the thread settings without a runtime env, whose set-up was measured to
     # add about 4 s to the first tasks on a busy 2-core machine.
-    saved = {k: os.environ.get(k) for k in TASK_ENV}
-    os.environ.update(TASK_ENV)
+    saved = {k: os.environ.get(k) for k in LOCAL_ENV}
+    os.environ.update(LOCAL_ENV)
     try:
         # "local": a new instance even when a `ray start` cluster runs on this machine
-        ray.init(address="local", num_cpus=os.cpu_count(), include_dashboard=False, **quiet)
+        ray.init(address="local", num_cpus=os.cpu_count(), include_dashboard=False,
+                 logging_level=logging.WARNING, log_to_driver=False)
     finally:
         for key, value in saved.items():
             if value is None:
                 os.environ.pop(key, None)
             else:
                 os.environ[key] = value
-    return True
+    record = folder / f"driver_{os.getpid()}.json"
+    ray_reaper.record(record, os.getpid())
+    _WATCHERS[os.getpid()] = subprocess.Popen(
+        [sys.executable, ray_reaper.__file__, str(os.getpid()), str(record)],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True)
+
+
+def shutdown_ray(ray) -> None:
+    """``ray.shutdown()``; the watcher of a local instance started here ends too."""
+    ray.shutdown()
+    watcher = _WATCHERS.pop(os.getpid(), None)
+    (reaper_folder() / f"driver_{os.getpid()}.json").unlink(missing_ok=True)
+    if watcher is not None:
+        try:
+            watcher.wait(timeout=10)  # type: ignore[attr-defined]
+        except Exception:  # noqa: BLE001 - it stops by itself once the record is gone
+            pass
 
 
 def run_state(run_dir: Path, target: int) -> tuple[RunState, int]:
@@ -373,7 +462,7 @@ def _run_on_ray(jobs: list[SeedJob], address: str | None, threads: int):
             yield res
     finally:
         if started:
-            ray.shutdown()
+            shutdown_ray(ray)
 
 
 def run_fanout(options: TrainOptions) -> int:
