@@ -81,6 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true",
                    help="continue the run in --out from its latest good checkpoint or final "
                         "model; the step counter continues")
+    p.add_argument("--allow-pickle", action="store_true",
+                   help="let --resume unpickle the statistics and replay buffer of a run "
+                        "saved before they were also written as arrays (a pickle can run any "
+                        "code: only for run folders you made or trust)")
     p.add_argument("--eval-freq", type=int, default=None,
                    help="env steps between evaluations, >= 1 (default: config); a run always "
                         "ends with one")

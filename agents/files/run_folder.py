@@ -18,12 +18,17 @@ export and the evaluation use its names and functions. A run folder
 ``learning_curve.png``         their plot
 ``tb/``                        TensorBoard
 ``train.log``                  what a seed of the fan-out printed
-``final_model.zip``,           stable-baselines3's pickled files, read back only by
-``best_model.zip``,            ``train.py --resume`` (and, on opt-in, by
-``vecnormalize.pkl``,          :mod:`tether_gym_agents.files.pickled`)
-``final_replay_buffer.pkl``,
-``checkpoints/model_<N>_steps.zip`` (+ ``model_vecnormalize_<N>_steps.pkl``,
-``model_replay_buffer_<N>_steps.pkl``)
+``final_model.zip``,           stable-baselines3's model zips; ``train.py --resume``
+``checkpoints/model_<N>_steps.zip``  reads only their tensors (``torch.load(weights_only=True)``)
+                               and plain JSON counters, never their pickled entries
+``vecnormalize.npz``,          the normalisation statistics and the replay buffer
+``final_replay_buffer.npz``    (SAC) as arrays, which ``--resume`` reads; likewise
+                               ``checkpoints/model_vecnormalize_<N>_steps.npz``,
+                               ``model_replay_buffer_<N>_steps.npz``
+``best_model.zip``,            stable-baselines3's pickled files, read only on
+``vecnormalize.pkl``,          opt-in (``--allow-pickle``; and
+``final_replay_buffer.pkl``,   :mod:`tether_gym_agents.files.pickled`)
+``checkpoints/*.pkl``
 =============================  =======================================================
 
 A folder of seed runs (``train.py --seeds N --out FOLDER``) holds ``seed_K/`` run

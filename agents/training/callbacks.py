@@ -38,6 +38,7 @@ from ..files.run_folder import (
     write_train_info,
 )
 from ..files.safe_format import ObsNormalization, save_agent
+from .checkpoint import safe_companion, save_buffer_npz, save_stats_npz
 from .settings import TrainSettings
 
 __all__ = ["PROGRESS_EVERY_S", "RunCallbacks", "RunEvalCallback", "RunCheckpointCallback",
@@ -56,13 +57,19 @@ def save_model(model, path: Path) -> None:
 
 
 def save_stats(vec_normalize, path: Path) -> None:
-    """``VecNormalize.save`` to ``path``, atomically."""
+    """``VecNormalize.save`` to ``path`` and its arrays beside it (``.npz``), atomically.
+
+    ``--resume`` reads the ``.npz`` (:mod:`.checkpoint`); the pickled ``.pkl`` is kept
+    for the opt-in readers (``evaluate.py --allow-pickle``, ``convert``).
+    """
+    save_stats_npz(vec_normalize, safe_companion(Path(path)))
     with atomic_target(Path(path)) as tmp:
         vec_normalize.save(str(tmp))
 
 
 def save_buffer(model, path: Path) -> None:
-    """``model.save_replay_buffer`` to ``path`` (a ``.pkl``), atomically."""
+    """``model.save_replay_buffer`` to ``path`` (a ``.pkl``) and its arrays (``.npz``)."""
+    save_buffer_npz(model, safe_companion(Path(path)))
     with atomic_target(Path(path)) as tmp:
         model.save_replay_buffer(tmp)
 

@@ -1,7 +1,9 @@
 """Resume a run: pick its newest good saved model, continue its records without doubles.
 
 ``train.py --resume`` (and the fan-out, for an interrupted seed) continues from the
-newest saved model that loads (a truncated one, as a kill mid-save leaves, is skipped),
+newest saved model that loads (a truncated one, as a kill mid-save leaves, is skipped)
+without unpickling anything (:mod:`.checkpoint`; pickled statistics and buffers of
+older runs only with ``--allow-pickle``, with a warning),
 keeps the evaluations and TensorBoard events up to that step and drops the later ones,
 which the resumed run repeats.
 """
@@ -12,6 +14,7 @@ import json
 import sys
 import zipfile
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -24,10 +27,11 @@ from ..files.run_folder import (
     saved_models,
     write_evaluations,
 )
+from .checkpoint import load_buffer_npz, load_stats_npz, load_zip_weights, safe_companion
 from .config import ConfigError
 
-__all__ = ["resume_candidates", "load_resume_point", "continue_eval_history",
-           "truncate_tensorboard"]
+__all__ = ["PICKLE_RESUME_WARNING", "ResumeBuild", "resume_candidates", "load_resume_point",
+           "continue_eval_history", "truncate_tensorboard"]
 
 
 def _zip_timesteps(path: Path) -> int | None:
@@ -55,45 +59,127 @@ def resume_candidates(run_dir: Path) -> list[tuple[int, SavedModel]]:
     return [(int(s or 0), saved) for s, _, saved in found]
 
 
-def load_resume_point(run_dir, algo_cls, venv, eval_env, normalize: bool, tb_log: str):
+PICKLE_RESUME_WARNING = ("warning: --allow-pickle: unpickling {files}; a pickle can run any "
+                         "code when it is loaded: do this only for run folders you made "
+                         "yourself or trust")
+
+
+class ResumeBuild(NamedTuple):
+    """How a resumed run builds its model and normalisation (for the safe load).
+
+    Attributes
+    ----------
+    new_model : callable
+        ``new_model(env)``: a fresh model of the run's algorithm and hyperparameters.
+    normalized : callable or None
+        ``normalized(venv, eval_env)``: both envs wrapped in new ``VecNormalize``; None
+        when the run does not normalise observations.
+    algo_cls : type
+        The algorithm (``algo_cls.load`` for a pickled resume, on opt-in).
+    tb_log : str
+        TensorBoard folder.
+    allow_pickle : bool
+        Whether pickled statistics and buffers may be loaded (``--allow-pickle``).
+    """
+
+    new_model: Any
+    normalized: Any
+    algo_cls: Any
+    tb_log: str
+    allow_pickle: bool = False
+
+
+def load_resume_point(run_dir: Path, build: ResumeBuild, venv, eval_env):
     """Load the newest good saved model; a truncated or incomplete one is skipped.
 
-    Returns (model, venv, eval_env, model_path, buffer_loaded).
-    """
-    from stable_baselines3.common.vec_env import VecNormalize
+    The model zip's tensors and counters, the statistics and the replay buffer are read
+    from arrays (:mod:`.checkpoint`); nothing is unpickled. A saved model whose
+    statistics are only pickled (``.pkl``, from an older run) is skipped unless
+    ``build.allow_pickle``, which loads it with stable-baselines3 and a warning.
 
+    Returns (model, venv, eval_env, model_path, buffer_loaded).
+
+    Raises
+    ------
+    ConfigError
+        When no saved model loads (naming ``--allow-pickle`` when pickled ones were
+        refused).
+    """
     candidates = resume_candidates(run_dir)
     if not candidates:
         raise ConfigError(f"--resume: no checkpoint or {FINAL_MODEL_FILE} in {run_dir}")
+    refused = []
     for steps, saved in candidates:
-        model_path, stats, buffer = saved.model, saved.stats, saved.buffer
-        try:
-            if normalize:
-                if not stats.is_file():
-                    raise FileNotFoundError(f"its normalisation statistics {stats.name} are "
-                                            "missing")
-                train_env = VecNormalize.load(str(stats), venv)
-                test_env = VecNormalize.load(str(stats), eval_env)
-                test_env.training = False
-                test_env.norm_reward = False
-            else:
-                train_env, test_env = venv, eval_env
-            model = algo_cls.load(model_path, env=train_env, device="cpu", tensorboard_log=tb_log)
-            loaded = False
-            if hasattr(model, "replay_buffer"):
-                if buffer.is_file():
-                    model.load_replay_buffer(buffer)
-                    loaded = True
-                else:
-                    print(f"warning: {model_path.name} has no replay buffer beside it "
-                          f"({buffer.name}); SAC continues with an empty buffer")
-        except Exception as exc:  # noqa: BLE001 - truncated files fail in many ways
-            print(f"warning: skipping {model_path} (step {steps}): {type(exc).__name__}: "
-                  f"{exc}", file=sys.stderr)
+        pickled = build.normalized is not None and not safe_companion(saved.stats).is_file() \
+            and saved.stats.is_file()
+        if pickled and not build.allow_pickle:
+            refused.append(saved.stats)
+            print(f"warning: skipping {saved.model} (step {steps}): its normalisation "
+                  f"statistics are pickled only ({saved.stats.name}, no "
+                  f"{safe_companion(saved.stats).name}); pass --allow-pickle to load them",
+                  file=sys.stderr)
             continue
-        return model, train_env, test_env, model_path, loaded
+        try:
+            if pickled:
+                print(PICKLE_RESUME_WARNING.format(files=[str(saved.stats), str(saved.model)]),
+                      file=sys.stderr)
+                return _load_pickled(saved, build, venv, eval_env)
+            return _load_safe(saved, build, venv, eval_env)
+        except Exception as exc:  # noqa: BLE001 - truncated files fail in many ways
+            print(f"warning: skipping {saved.model} (step {steps}): {type(exc).__name__}: "
+                  f"{exc}", file=sys.stderr)
+    if refused:
+        raise ConfigError(f"--resume: no saved model of {run_dir} loads without unpickling: "
+                          f"{[str(p) for p in refused]} are pickled (loading them can run "
+                          "code from the file); pass --allow-pickle if you made them or "
+                          "trust them")
     raise ConfigError(f"--resume: no loadable model in {run_dir} (all "
                       f"{len(candidates)} saved models are truncated or incomplete)")
+
+
+def _load_safe(saved: SavedModel, build: ResumeBuild, venv, eval_env):
+    """A saved model rebuilt from arrays and JSON: (model, venv, eval_env, path, buffer)."""
+    if build.normalized is not None:
+        stats = safe_companion(saved.stats)
+        if not stats.is_file():
+            raise FileNotFoundError(f"its normalisation statistics {stats.name} are missing")
+        venv, eval_env = build.normalized(venv, eval_env)
+        load_stats_npz((venv, eval_env), stats)
+    model = build.new_model(venv)
+    load_zip_weights(model, saved.model)
+    return model, venv, eval_env, saved.model, _load_buffer(model, saved, build.allow_pickle)
+
+
+def _load_buffer(model, saved: SavedModel, allow_pickle: bool) -> bool:
+    """Fill an off-policy model's replay buffer from beside its saved model (True if so)."""
+    if not hasattr(model, "replay_buffer"):
+        return False
+    arrays = safe_companion(saved.buffer)
+    if arrays.is_file():
+        load_buffer_npz(model, arrays)
+        return True
+    if saved.buffer.is_file() and allow_pickle:
+        print(PICKLE_RESUME_WARNING.format(files=[str(saved.buffer)]), file=sys.stderr)
+        model.load_replay_buffer(saved.buffer)
+        return True
+    pickled = (f"; its pickled {saved.buffer.name} is read only with --allow-pickle"
+               if saved.buffer.is_file() else "")
+    print(f"warning: {saved.model.name} has no replay buffer beside it ({arrays.name}"
+          f"){pickled}; SAC continues with an empty buffer")
+    return False
+
+
+def _load_pickled(saved: SavedModel, build: ResumeBuild, venv, eval_env):
+    """stable-baselines3's own load of pickled files (``--allow-pickle`` only)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    train_env = VecNormalize.load(str(saved.stats), venv)
+    test_env = VecNormalize.load(str(saved.stats), eval_env)
+    test_env.training = False
+    test_env.norm_reward = False
+    model = build.algo_cls.load(saved.model, env=train_env, device="cpu",
+                                tensorboard_log=build.tb_log)
+    return model, train_env, test_env, saved.model, _load_buffer(model, saved, True)
 
 
 def continue_eval_history(callback, run_dir: Path, last_step: int) -> int:

@@ -123,6 +123,8 @@ def train(settings: TrainSettings) -> RunSummary:
         print(f"  note: {note}")
     previous = _previous_info(out) if settings.resume else {}
     clock = RunClock(settings, _previous_wall(out, previous))
+    if settings.resume:
+        _remove_temporaries(out)
     clock.write("running", int(previous.get("num_timesteps", 0)))
     model, venv, eval_env = _model(settings)
     _write_records(settings)
@@ -136,7 +138,7 @@ def train(settings: TrainSettings) -> RunSummary:
     wall = time.perf_counter() - t0
     env = model.get_env()
     if isinstance(env, VecNormalize):
-        save_stats(env, out / VECNORMALIZE_FILE)
+        save_stats(env, out / VECNORMALIZE_FILE)  # .pkl and the .npz that resume reads
     if hasattr(model, "replay_buffer"):
         save_buffer(model, out / REPLAY_BUFFER_FILE)
     save_model(model, out / FINAL_MODEL_FILE)  # last: a final model has its other files
@@ -172,6 +174,17 @@ def _previous_info(out: Path) -> dict:
     return info if isinstance(info, dict) else {}
 
 
+def _remove_temporaries(out: Path) -> None:
+    """Remove the temporary files (``.tmp-*``) a killed call left mid-write."""
+    import shutil
+
+    for path in sorted(out.rglob(".tmp-*"), reverse=True):
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path, ignore_errors=True)
+        else:
+            path.unlink(missing_ok=True)
+
+
 def _previous_wall(out: Path, previous: dict) -> float:
     """Wall time of the earlier calls [s], with the killed part after the last record.
 
@@ -191,38 +204,52 @@ def _previous_wall(out: Path, previous: dict) -> float:
 
 def _model(settings: TrainSettings):
     """(model, training env, evaluation env): a new model, or the resume point's."""
-    from stable_baselines3.common.vec_env import VecNormalize
-
     venv = make_venv(settings, settings.n_envs, settings.seed)
     eval_env = make_venv(settings, 1, settings.seed + 10_000)
     if settings.residual is not None:
         print(f"  residual hybrid: {json.dumps(settings.residual.to_dict())}: the agent learns "
               "a in u = filter(clip(u_smc + scale * a, -1, 1))")
-    algo_cls = algo_class(settings.algo)
-    tb_log = str(settings.out / TB_DIR)
     if settings.resume:
-        return _resumed_model(settings, algo_cls, venv, eval_env)
+        return _resumed_model(settings, venv, eval_env)
+    if settings.normalize is not False:
+        venv, eval_env = _normalized(settings, venv, eval_env)
+    return _new_model(settings, venv), venv, eval_env
+
+
+def _normalized(settings: TrainSettings, venv, eval_env):
+    """Both envs wrapped in new ``VecNormalize`` (the config's ``normalize`` options)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
     norm = settings.normalize
-    if norm is not False:
-        norm_kwargs = norm if isinstance(norm, dict) else {}
-        gamma = settings.hyperparams.get("gamma", 0.99)
-        venv = VecNormalize(venv, gamma=gamma, **norm_kwargs)
-        eval_env = VecNormalize(eval_env, gamma=gamma, training=False,
-                                norm_obs=norm_kwargs.get("norm_obs", True), norm_reward=False,
-                                clip_obs=norm_kwargs.get("clip_obs", 10.0))
-    model = algo_cls(settings.run.get("policy", "MlpPolicy"), venv, seed=settings.seed,
-                     device="cpu", tensorboard_log=tb_log, verbose=settings.options.verbose,
-                     **with_schedules(settings.hyperparams))
-    return model, venv, eval_env
+    norm_kwargs = norm if isinstance(norm, dict) else {}
+    gamma = settings.hyperparams.get("gamma", 0.99)
+    venv = VecNormalize(venv, gamma=gamma, **norm_kwargs)
+    eval_env = VecNormalize(eval_env, gamma=gamma, training=False,
+                            norm_obs=norm_kwargs.get("norm_obs", True), norm_reward=False,
+                            clip_obs=norm_kwargs.get("clip_obs", 10.0))
+    return venv, eval_env
 
 
-def _resumed_model(settings: TrainSettings, algo_cls, venv, eval_env):
+def _new_model(settings: TrainSettings, venv):
+    """A new model of the run's algorithm and hyperparameters on ``venv``."""
+    return algo_class(settings.algo)(
+        settings.run.get("policy", "MlpPolicy"), venv, seed=settings.seed, device="cpu",
+        tensorboard_log=str(settings.out / TB_DIR), verbose=settings.options.verbose,
+        **with_schedules(settings.hyperparams))
+
+
+def _resumed_model(settings: TrainSettings, venv, eval_env):
     """The newest good saved model of the run, with its envs; TensorBoard cut to its step."""
-    from .resume import load_resume_point, truncate_tensorboard
+    from .resume import ResumeBuild, load_resume_point, truncate_tensorboard
 
+    build = ResumeBuild(
+        new_model=lambda env: _new_model(settings, env),
+        normalized=(None if settings.normalize is False
+                    else lambda v, e: _normalized(settings, v, e)),
+        algo_cls=algo_class(settings.algo), tb_log=str(settings.out / TB_DIR),
+        allow_pickle=settings.options.allow_pickle)
     model, venv, eval_env, model_path, buffer_loaded = load_resume_point(
-        settings.out, algo_cls, venv, eval_env, settings.normalize is not False,
-        str(settings.out / TB_DIR))
+        settings.out, build, venv, eval_env)
     start = int(model.num_timesteps)
     removed = truncate_tensorboard(settings.out / TB_DIR, start)
     print(f"resuming from {model_path} at step {start}"
