@@ -20,9 +20,11 @@ the run:
   ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
 * ``train_info.json`` (steps, wall time including interrupted parts, seed; rewritten
   every ``PROGRESS_EVERY_S`` seconds while training);
-* for ``--resume`` only, stable-baselines3's own pickled files, which this package
-  writes and reads back itself: ``final_model.zip``, ``best_model.zip``,
-  ``vecnormalize.pkl``, ``final_replay_buffer.pkl`` (SAC) and ``checkpoints/``.
+* for ``--resume``: the models (``final_model.zip``, ``best_model.zip``,
+  ``checkpoints/``), read back as tensors only, and the normalisation statistics and
+  SAC's replay buffer as ``.npz`` arrays; stable-baselines3's pickled
+  ``vecnormalize.pkl`` and ``*replay_buffer.pkl`` are written beside them for other
+  tools and are unpickled only with ``--allow-pickle``.
 
 The layout is owned by :mod:`tether_gym_agents.files.run_folder`.
 """

@@ -348,7 +348,14 @@ def _read_params(options: TrainOptions, out: Path) -> tuple[dict, str]:
     resolved = out / CONFIG_FILE
     if not resolved.is_file():
         raise ConfigError(f"--resume: {resolved} not found (is {out} a run folder?)")
-    saved = read_config(out)
+    import yaml
+
+    try:
+        saved = read_config(out)
+    except (OSError, yaml.YAMLError) as exc:
+        raise ConfigError(f"--resume: {resolved} cannot be read: {exc}") from None
+    if not isinstance(saved, dict):
+        raise ConfigError(f"--resume: {resolved} is not a mapping of run settings")
     if saved.get("algo") not in (None, options.algo):
         raise ConfigError(f"--resume: {out} is a {saved['algo'].upper()} run; pass "
                           f"--algo {saved['algo']}")

@@ -79,6 +79,7 @@ from .fanout import (
     init_ray,
     require_ray,
     run_jobs,
+    shutdown_ray,
     train_seed,
 )
 from .settings import TrainOptions, TrainSettings, resolve_settings
@@ -265,7 +266,7 @@ def final_eval_return(run_dir: Path) -> float:
     data = read_evaluations(run_dir)
     if data is None or data["results"].shape[0] == 0:
         return float("nan")
-    return float(np.mean(data["results"][-1]))
+    return float(np.nanmean(data["results"][-1]))  # rows of shorter evaluations are NaN-padded
 
 
 def rank_trials(trials: list[dict]) -> list[dict]:
@@ -494,7 +495,7 @@ def _run_optuna(options, spec, base, target, seeds, out) -> int:
         if started:
             import ray
 
-            ray.shutdown()
+            shutdown_ray(ray)
     results = [grid[i] for i in range(len(grid))]
     trials = _optuna_rows(results, spec, names, target)
     print(write_table(rank_trials(trials), out, list(spec.params)))

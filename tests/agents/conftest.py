@@ -9,8 +9,8 @@ import pytest
 def ray_session():
     """One local Ray instance per test module (the fan-out reuses it and leaves it up)."""
     ray = pytest.importorskip("ray")
-    from tether_gym_agents.training.fanout import init_ray
+    from tether_gym_agents.training.fanout import init_ray, shutdown_ray
 
     init_ray()
     yield ray
-    ray.shutdown()
+    shutdown_ray(ray)

@@ -208,3 +208,15 @@ def test_every_run_ends_with_an_evaluation_of_its_final_weights(tmp_path, monkey
                                                                (1024, model._n_updates)]
     assert model._n_updates > 0
     assert list(_npz(out)["timesteps"]) == [512, 1024]
+
+
+def test_resume_with_a_damaged_config_names_the_file(tmp_path, capsys):
+    """A config.yml that is not YAML ends in one error naming it, exit 2, no traceback."""
+    from tether_gym_agents.cli.train import main
+
+    run = tmp_path / "run"
+    run.mkdir()
+    (run / "config.yml").write_text("algo: ppo\nhyperparams: {n_steps: [1, 2\n")
+    assert main(["--resume", "--out", str(run), "--timesteps", "64"]) == 2
+    err = capsys.readouterr().err
+    assert "config.yml cannot be read" in err and "Traceback" not in err
