@@ -15,6 +15,7 @@ import tether_gym
 from tether_gym.safety import SafetyFilter
 from tether_gym.wrappers import (
     IDLE_INFO,
+    INFEASIBLE_WARNING,
     INFO_KEYS,
     FilterInTheLoop,
     SafetyFilterWrapper,
@@ -132,6 +133,31 @@ def test_filter_in_the_loop_is_the_filter_with_counters():
     assert tuple(loop.info(i)) == INFO_KEYS
     loop.reset_counts()
     assert (loop.steps, loop.interventions, loop.infeasible, loop.last_result) == (0, 0, 0, None)
+    env.close()
+
+
+def test_infeasible_commands_warn_once_and_are_counted():
+    # row 0 lies near the horizontal (theta = 1.4 rad) with theta' = -1: T^ ~ l (3 cos^2
+    # theta - 1) < 0 for every command (a reel-in's -l'' is capped by the acceleration
+    # limit); row 1 hangs still and is safe
+    env = _env()
+    y = np.array([[1.4, 1.4, -1.0, -1.0, 0.5, 0.5, 0.0, 0.0],
+                  [0.0, 0.0, 0.0, 0.0, 0.5, 0.5, 0.0, 0.0]])
+    nu, desired = np.zeros(2), np.zeros((2, 2))
+    res = SafetyFilter.for_env(env).project(nu, y, desired)
+    assert res.feasible.tolist() == [False, True]
+    loop = FilterInTheLoop(SafetyFilter.for_env(env), 2)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        loop((nu, y), desired)
+        loop((nu, y), desired)  # a second infeasible call: counted, not warned again
+    assert [str(w.message) for w in caught] == [INFEASIBLE_WARNING]
+    assert caught[0].category is UserWarning
+    assert (loop.steps, loop.infeasible) == (4, 2)
+    assert loop.info(0)["filter_feasible"] is False and loop.info(1)["filter_feasible"] is True
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        loop((nu[1:], y[1:]), desired[1:])  # feasible: no warning
     env.close()
 
 

@@ -114,10 +114,22 @@ class SafetyFilter:
       ``length`` outside [l_min, l_max]).
 
     Nothing else: not tumbling (|theta_j| >= pi/2), the reference tracking, the reel
-    effort or any step after the next (only the braking distance looks further). The
-    prediction knows neither the disturbance nor the observation noise, nor the true e
-    and masses when they differ from the nominal ones, and it starts from the state it
-    is given (true or observed: the caller's choice,
+    effort or any step after the next (only the braking distance looks further). A
+    one-step projection cannot guard the libration bound: the reels act on theta
+    through theta'' (the Coriolis term -2 (l'/l)(1 + theta') of reeling,
+    docs/model.md, "Check: a single tether"), so over the whole command box the
+    predicted theta at the end of a step moves by a median 2.5e-4 rad (max 3.1e-3)
+    while theta itself drifts by a median 8.8e-3 rad per step (6791 states of random
+    rate policies, ``experiments/issue24/filter_outcomes.py``). Keeping tension by
+    refusing fast reel-outs can therefore trade slack for tumble: uniform random
+    commands, 30 episodes, end 26 slack / 0 tumble / 4 survived unfiltered and 6 slack
+    / 18 tumble / 6 survived filtered. Guarding both needs a horizon of several steps
+    (a model-predictive controller). When no command meets both constraints, the
+    returned command is the best effort described in :meth:`project`,
+    ``FilterResult.feasible`` is False, and :class:`tether_gym.wrappers.FilterInTheLoop`
+    warns once and counts it. The prediction knows neither the disturbance nor the
+    observation noise, nor the true e and masses when they differ from the nominal
+    ones, and it starts from the state it is given (true or observed: the caller's choice,
     :class:`tether_gym.wrappers.FilterInTheLoop`).
 
     Parameters

@@ -13,6 +13,7 @@ policies and the residual training of ``tether_gym_agents`` use it on observatio
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Callable
 from types import MappingProxyType
 from typing import Any
@@ -24,7 +25,8 @@ from .envs.actions import require_rate_mode
 from .physics import STATE
 from .safety import FilterResult, SafetyFilter, env_config
 
-__all__ = ["SafetyFilterWrapper", "FilterInTheLoop", "INFO_KEYS", "IDLE_INFO", "state_of"]
+__all__ = ["SafetyFilterWrapper", "FilterInTheLoop", "INFO_KEYS", "IDLE_INFO", "state_of",
+           "INFEASIBLE_WARNING"]
 
 IDLE_INFO = MappingProxyType({"filter_active": False, "filter_correction": 0.0,
                               "filter_feasible": True})
@@ -34,6 +36,13 @@ INFO_KEYS = tuple(IDLE_INFO)
 """Entries a filter in the loop adds to every step's ``info``: ``filter_active`` (bool,
 the command was changed), ``filter_correction`` (float, |u_filtered - u| [-]) and
 ``filter_feasible`` (bool, the command sent meets every predicted constraint)."""
+
+INFEASIBLE_WARNING = (
+    "safety filter: no reel command meets every predicted constraint (tension >= margin, "
+    "braking-stop length inside the bounds) at some step; it sent the command of largest "
+    "predicted tension margin inside the length box. Such steps have "
+    "info['filter_feasible'] False and are counted by FilterInTheLoop.infeasible")
+"""Text of the warning of the first infeasible command of a :class:`FilterInTheLoop`."""
 
 State = tuple[float | np.ndarray, np.ndarray]
 """(nu [rad], scalar or (B,); state rows (B, 4n) in the STATE layout)."""
@@ -72,6 +81,10 @@ class FilterInTheLoop:
     one per row), ``interventions`` (of those, the ones the filter changed),
     ``infeasible`` (the ones with no command meeting every constraint); ``last_result``
     and ``last_active`` ((B,) bool) describe the last call (None without a filter).
+
+    The first infeasible command also raises :data:`INFEASIBLE_WARNING` as a
+    ``UserWarning`` (Python shows it once per process by default): the command sent
+    then is the one of largest predicted tension, which may still go slack.
     """
 
     def __init__(self, safety_filter: SafetyFilter | None, n_tethers: int):
@@ -114,7 +127,10 @@ class FilterInTheLoop:
         self.last_active = res.active.copy()
         self.steps += int(res.active.shape[0])
         self.interventions += int(res.active.sum())
-        self.infeasible += int((~res.feasible).sum())
+        infeasible = int((~res.feasible).sum())
+        if infeasible and not self.infeasible:
+            warnings.warn(INFEASIBLE_WARNING, UserWarning, stacklevel=2)
+        self.infeasible += infeasible
         return res.command
 
     def info(self, row: int = 0) -> dict[str, Any]:
