@@ -6,7 +6,7 @@ Importing the package registers ``tether_gym/TetherLibration-v1``. Heavy modules
 
 from gymnasium.envs.registration import register
 
-__version__ = "0.5.0"
+__version__ = "0.6.0"
 __all__ = ["__version__", "ENV_ID", "DEFAULT_MAX_EPISODE_STEPS"]
 
 ENV_ID = "tether_gym/TetherLibration-v1"

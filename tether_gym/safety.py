@@ -192,7 +192,8 @@ class SafetyFilter:
     @classmethod
     def for_env(cls, env: Any, margin: float | None = None,
                 length_margin: float | None = None, eccentricity: float | None = None,
-                masses=None) -> SafetyFilter:
+                masses=None, reel_time_constant: float | None = None,
+                accel_limit: float | None = None) -> SafetyFilter:
         """Build for a TetherLibration env (wrapped or not, single or vector).
 
         Parameters
@@ -214,10 +215,21 @@ class SafetyFilter:
             Nominal e [-] and subsatellite masses (any common unit) of the predicting
             model when they differ from the env's (model-mismatch studies); None takes
             the env's configured ones.
+        reel_time_constant, accel_limit : float or None
+            Nominal reel lag tau [rad] (> 0) and acceleration limit [m/s^2] (> 0) of the
+            predicting model (the env's arguments of those names); None takes the env's.
         """
+        from dataclasses import replace
+
         cfg = env_config(env)
-        par = cfg.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
-                             cfg.masses if masses is None else masses)
+        reels = cfg.reels
+        if reel_time_constant is not None:
+            reels = replace(reels, time_constant=reel_time_constant)
+        if accel_limit is not None:
+            reels = replace(reels, accel_limit=accel_limit)
+        par = cfg.scales.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
+                                    cfg.masses if masses is None else masses,
+                                    cfg.chain.gravity, reels)
         if margin is None:
             margin = float(cfg.reward_weights.safe_tension)
         if length_margin is None:

@@ -46,7 +46,7 @@ from .scenarios import Scenario, get_suite
 
 __all__ = ["evaluate", "EvalOptions", "check_int", "check_out_dir", "resolve_policy",
            "make_policy", "default_policies", "PolicyKind", "PolicySpec", "BASELINES",
-           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "MAX_TORCH_THREADS"]
+           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "MAX_TORCH_THREADS", "compute_cost"]
 
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
@@ -180,12 +180,15 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
         log(f"  checked {sum(s.n_runs for s in specs)} policy run(s) against "
             f"{len(settings)} scenario(s) in {time.perf_counter() - t_start:.1f} s")
         episodes, trajectories = _run_all(specs, settings, seeds, log)
+        compute = {spec.name: compute_cost(spec, settings[0], seeds[0]) for spec in specs}
+        log("  compute per control step [ms], median / p99: " + ", ".join(
+            f"{name} {med:.3g} / {p99:.3g}" for name, (med, p99) in compute.items()))
     finally:
         for st in settings:
             st.close()
     results = build_results(specs, settings, seeds, episodes, env_kwargs=env_kwargs,
                             suite=suite, command=opts.command,
-                            torch_threads=opts.torch_threads)
+                            torch_threads=opts.torch_threads, compute=compute)
     _write(results, trajectories, settings[0].scenario, opts)
     return results
 
@@ -291,6 +294,36 @@ def _check_run(spec: PolicySpec, run: int, st: _Setting, seed: int) -> None:
     if shape not in ((1, n_act), (n_act,)):
         raise ValueError(f"{where}: action of shape {shape} for an env with "
                          f"{n_act} reels (observation {obs.shape})")
+
+
+class _Timed:
+    """A policy whose ``predict`` calls are timed (wall clock, ``time.perf_counter``)."""
+
+    def __init__(self, policy):
+        self._policy = policy
+        self.seconds: list[float] = []
+
+    def __getattr__(self, name: str):
+        return getattr(self._policy, name)
+
+    def predict(self, *args, **kwargs):
+        t0 = time.perf_counter()
+        out = self._policy.predict(*args, **kwargs)
+        self.seconds.append(time.perf_counter() - t0)
+        return out
+
+
+def compute_cost(spec: PolicySpec, st: _Setting, seed: int) -> tuple[float, float]:
+    """(median, p99) wall time [ms] of ``spec``'s ``predict`` per control step.
+
+    One episode of the scenario ``st`` (the policy's first run, env seed ``seed``), one
+    observation per call, as a controller in the loop would run: the learned agents'
+    batched calls of the benchmark itself would hide their per-call overhead.
+    """
+    timed = _Timed(spec.policies(0, st.env_for(spec), st.scenario, [seed])[0])
+    rollout([timed], [seed], st.kwargs_for(spec))
+    ms = 1e3 * np.asarray(timed.seconds)
+    return float(np.median(ms)), float(np.percentile(ms, 99))
 
 
 def _run_all(specs: list[PolicySpec], settings: list[_Setting], seeds: list[int],

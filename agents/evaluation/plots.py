@@ -1,10 +1,17 @@
-"""Plots of the benchmark: one trajectory per policy, and IQM interval estimates.
+"""Plots of the benchmark: the performance profile, one trajectory per policy, intervals.
+
+* ``profile.png``: the performance profile of tracking precision, one curve per
+  policy: the fraction of *all* its episodes (every run, scenario and seed) that survive
+  with a tracking RMS after orbit 1 <= tau, against tau on a log axis. A failed
+  episode never reaches any tau (as in Dolan & More's performance profiles, and
+  rliable's score distributions): a curve's right end is the policy's success rate.
 
 * ``trajectories.png``: max_i |theta_i - theta_d| and l_1 + ... + l_n over the first
   scenario's first seed (run 0) of every policy; the title names the scenario, and an
   episode that ended in a failure ends with an ``x`` marker labelled with the reason.
 * ``metrics.png``: per column of the table (``results.TABLE_COLUMNS``, four panels to a
-  row), each policy's IQM (dot) with its 95 % stratified-bootstrap
+  row), each policy's IQM (dot; success: the surviving fraction of all episodes) with
+  its 95 % stratified-bootstrap
   interval (bar), as rliable's ``plot_interval_estimates``; an undefined value (such as
   the convergence time of a policy that never converges) is written "n/a", never drawn.
 """
@@ -18,7 +25,7 @@ import numpy as np
 
 from .results import TABLE_COLUMNS
 
-__all__ = ["plot_results", "PLOT_PIP"]
+__all__ = ["plot_results", "profile_curve", "PLOT_PIP"]
 
 PLOT_PIP = 'pip install "matplotlib>=3.7"'
 LOG_SCALE = ("tracking_rms", "final_error", "chattering", "reel_effort")
@@ -31,7 +38,7 @@ def _finite(x) -> bool:
 
 
 def plot_results(results: dict, trajectories: dict, scenario, out: Path, log=print) -> list:
-    """Write ``trajectories.png`` and ``metrics.png`` into ``out``; return the paths.
+    """Write ``profile.png``, ``trajectories.png`` and ``metrics.png``; return the paths.
 
     Without matplotlib, logs the pip command and writes nothing.
     """
@@ -43,10 +50,50 @@ def plot_results(results: dict, trajectories: dict, scenario, out: Path, log=pri
         log(f"  (plots skipped: matplotlib is missing; install it with: {PLOT_PIP})")
         return []
     out = Path(out)
-    written = [_trajectories(Figure, FigureCanvasAgg, trajectories, scenario, out),
+    written = [_profile(Figure, FigureCanvasAgg, results, out),
+               _trajectories(Figure, FigureCanvasAgg, trajectories, scenario, out),
                _intervals(Figure, FigureCanvasAgg, results, out)]
-    log(f"  wrote {written[0]} and {written[1]}")
+    log("  wrote " + ", ".join(str(p) for p in written))
     return written
+
+
+def profile_curve(episodes: list[dict], taus: np.ndarray) -> np.ndarray:
+    """Fraction of ``episodes`` that survive with tracking RMS <= tau, for each tau.
+
+    The denominator is every episode; a failed one (``success`` 0) or one without a
+    tracking RMS counts as never reaching tau.
+    """
+    if not episodes:
+        return np.full(len(taus), np.nan)
+    reached = np.array([e["tracking_rms"] for e in episodes
+                        if e["success"] == 1 and _finite(e["tracking_rms"])])
+    return np.array([(reached <= t).sum() for t in taus]) / len(episodes)
+
+
+def _profile(Figure, Canvas, results: dict, out: Path) -> Path:
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    Canvas(fig)
+    ax = fig.subplots()
+    eps = results["episodes"]
+    rms = [e["tracking_rms"] for e in eps if e["success"] == 1 and _finite(e["tracking_rms"])
+           and e["tracking_rms"] > 0]
+    lo, hi = (min(rms), max(rms)) if rms else (1e-6, 1.0)
+    taus = np.logspace(np.log10(lo) - 0.3, np.log10(hi) + 0.3, 400)
+    for k, name in enumerate(results["policies"]):
+        curve = profile_curve([e for e in eps if e["policy"] == name], taus)
+        ax.step(taus, curve, where="post", label=name, color=f"C{k % 10}",
+                ls="-" if k < 10 else "--")
+    ax.set_xscale("log")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_xlabel("tau: tracking RMS after orbit 1 [rad]")
+    ax.set_ylabel("fraction of all episodes with RMS <= tau")
+    ax.set_title(f"Performance profile, suite {results['suite']!r} (every run, scenario and "
+                 "seed; failed episodes never reach tau)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="upper left")
+    path = out / "profile.png"
+    fig.savefig(path, dpi=100)
+    return path
 
 
 def _trajectories(Figure, Canvas, trajectories: dict, scenario, out: Path) -> Path:
@@ -119,7 +166,8 @@ def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
         ax.set_ylim(-0.7, len(names) - 0.3)
         ax.set_title(title, fontsize=9)
         ax.grid(True, axis="x", alpha=0.3)
-    fig.suptitle("IQM over runs x scenarios with 95 % stratified-bootstrap intervals "
+    fig.suptitle("IQM over runs x scenarios (success: surviving fraction of all episodes) "
+                 "with 95 % stratified-bootstrap intervals "
                  f"(suite {results['suite']!r}; intervals need 2+ runs; n/a: undefined)",
                  fontsize=10)
     path = out / "metrics.png"

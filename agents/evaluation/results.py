@@ -5,11 +5,17 @@
     meta        versions, command, git commit, threads, agent files with sha256
     suite, seeds, env_kwargs, scenarios {name: {description, env_kwargs, nominal}}
     statistics  how the numbers below are computed
-    policies    {name: {kind, n_runs, runs, n_episodes, <metric>: IQM, ...,
+    policies    {name: {kind, n_runs, runs, n_episodes, survived, success_rate,
+                        worst_scenario, worst_scenario_success, <metric>: IQM, ...,
+                        compute_ms_per_step, compute_ms_per_step_p99,
                         ci95: {metric: [lo, hi] or null},
                         probability_of_improvement: {metric: p or null},
                         failures: {slack, tumble, length}}}
     per_scenario {scenario: {policy: {<metric>: IQM over runs, ci95: {<metric>: [lo, hi]}}}}
+
+Success is the raw surviving fraction of all episodes everywhere (``success`` and
+``success_rate`` of a policy, ``success`` of a scenario), never an IQM: a failed
+episode is never trimmed away (:mod:`.stats`).
     episodes    [{policy, run, scenario, seed, <every metric>}, ...]
 
 so that anyone can recompute the statistics from ``episodes``.
@@ -33,6 +39,8 @@ from .stats import (
     probability_of_improvement,
     run_scores,
     stratified_bootstrap_ci,
+    success_counts,
+    success_rate_ci,
 )
 
 __all__ = ["build_results", "write_results", "markdown_tables", "to_jsonable", "run_meta",
@@ -123,7 +131,16 @@ def run_meta(specs, command: str | None, torch_threads: int | None) -> dict:
 STATISTICS = {
     "point_estimate": "interquartile mean (scipy.stats.trim_mean, 25 % cut at each "
                       "end) over runs x scenarios of each run's mean over its "
-                      "episodes; undefined episode values left out",
+                      "episodes; undefined episode values left out; success excepted",
+    "success": "success and success_rate: surviving episodes / all episodes (raw, "
+               "nothing trimmed); worst_scenario_success: the same for the scenario "
+               "where it is lowest; per scenario: over all runs' episodes; ci95 of "
+               "success: percentile interval over the same stratified bootstrap of "
+               "runs",
+    "compute_ms_per_step": "median (and p99) wall time of one predict call on one "
+                           "observation, over the control steps of one episode "
+                           "(first scenario, first run, first seed), torch on the "
+                           "requested threads",
     "ci95": f"95 % percentile interval of the IQM over {N_BOOTSTRAP} stratified "
             "bootstrap resamples (runs drawn with replacement within each "
             f"scenario, seed {BOOTSTRAP_SEED}); null with fewer than 2 runs",
@@ -144,10 +161,15 @@ def _policy_block(spec, eps: list[dict], scores: dict, reference: dict | None,
     block = {"kind": spec.kind.value, "n_runs": spec.n_runs,
              "runs": [None if p is None else display_path(p) for p in spec.runs],
              "env_kwargs": spec.env_kwargs, "n_episodes": len(eps)}
+    counts = success_counts(eps, list(range(spec.n_runs)), scenario_names)
+    worst, worst_rate = counts.worst(scenario_names)
+    block.update(survived=int(counts.survived.sum()), success_rate=counts.rate,
+                 worst_scenario=worst, worst_scenario_success=worst_rate)
     for m in METRICS:
         block[m] = iqm(scores[m])
-    block["success_rate"] = block["success"]
+    block["success"] = counts.rate
     block["ci95"] = {m: stratified_bootstrap_ci(scores[m]) for m in METRICS}
+    block["ci95"]["success"] = success_rate_ci(counts)
     block["probability_of_improvement"] = {
         m: (None if reference is None else probability_of_improvement(
             scores[m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
@@ -158,10 +180,26 @@ def _policy_block(spec, eps: list[dict], scores: dict, reference: dict | None,
     return block
 
 
+def _scenario_block(scores: dict, eps: list[dict], n_runs: int, scenario: str,
+                    j: int) -> dict:
+    """One policy on one scenario: IQM over runs (success: raw fraction), intervals."""
+    counts = success_counts([e for e in eps if e["scenario"] == scenario],
+                            list(range(n_runs)), [scenario])
+    block = {m: iqm(scores[m][:, j]) for m in METRICS}
+    block["success"] = counts.rate
+    block["ci95"] = {m: stratified_bootstrap_ci(scores[m][:, j:j + 1]) for m in METRICS}
+    block["ci95"]["success"] = success_rate_ci(counts)
+    return block
+
+
 def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_kwargs: dict,
                   suite: str, command: str | None = None,
-                  torch_threads: int | None = None) -> dict:
-    """The results dict (module docstring) from the per-episode records."""
+                  torch_threads: int | None = None, compute: dict | None = None) -> dict:
+    """The results dict (module docstring) from the per-episode records.
+
+    ``compute`` maps a policy name to its ``(median, p99)`` wall time per control step
+    [ms] (:func:`.benchmark.compute_cost`); a policy without an entry gets null.
+    """
     scenario_names = [st.scenario.name for st in settings]
     by_policy = {s.name: [e for e in episodes if e["policy"] == s.name] for s in specs}
     scores = {s.name: {m: run_scores(by_policy[s.name], m, list(range(s.n_runs)),
@@ -169,12 +207,13 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
     reference = scores.get(REFERENCE_POLICY)
     policies = {spec.name: _policy_block(spec, by_policy[spec.name], scores[spec.name],
                                          reference, scenario_names) for spec in specs}
-    per_scenario = {
-        sc: {spec.name: {**{m: iqm(scores[spec.name][m][:, j]) for m in METRICS},
-                         "ci95": {m: stratified_bootstrap_ci(scores[spec.name][m][:, j:j + 1])
-                                  for m in METRICS}}
-             for spec in specs}
-        for j, sc in enumerate(scenario_names)}
+    for name, block in policies.items():
+        median, p99 = (compute or {}).get(name, (None, None))
+        block.update(compute_ms_per_step=median, compute_ms_per_step_p99=p99)
+    per_scenario = {sc: {spec.name: _scenario_block(scores[spec.name], by_policy[spec.name],
+                                                   spec.n_runs, sc, j)
+                         for spec in specs}
+                    for j, sc in enumerate(scenario_names)}
     return {
         "meta": run_meta(specs, command, torch_threads),
         "suite": str(suite),
@@ -205,8 +244,24 @@ def _num(x) -> str:
     return f"{x:.2g}"
 
 
+def _worst(block: dict) -> str:
+    """``fraction (scenario)`` of the worst scenario's surviving episodes."""
+    rate = block.get("worst_scenario_success")
+    if rate is None or not math.isfinite(rate):
+        return "n/a"
+    return f"{rate:.2f} ({block['worst_scenario']})"
+
+
+def _ms(block: dict) -> str:
+    """Median compute time per control step [ms] (n/a when it was not measured)."""
+    ms = block.get("compute_ms_per_step")
+    return "n/a" if ms is None or not math.isfinite(ms) else f"{ms:.2g}"
+
+
 def _cell(block: dict, metric: str) -> str:
     text = _num(block[metric])
+    if metric == "success" and "survived" in block:
+        text += f" ({block['survived']}/{block['n_episodes']})"
     ci = block["ci95"][metric]
     if ci is not None:
         text += f" [{_num(ci[0])}, {_num(ci[1])}]"
@@ -221,15 +276,17 @@ def markdown_tables(results: dict) -> str:
     """
     pols = results["policies"]
     names = list(pols)
-    lines = ["IQM over training runs x scenarios [95 % stratified-bootstrap CI, 2+ runs]", "",
+    lines = ["Success: surviving fraction of all episodes (survived/episodes); other "
+             "metrics: IQM over training runs x scenarios; [95 % stratified-bootstrap CI "
+             "over runs, 2+ runs]", "",
              "| policy | kind | runs | " + " | ".join(t for _, t in TABLE_COLUMNS)
-             + " | failures slack/tumble/length |",
-             "|---" * (len(TABLE_COLUMNS) + 4) + "|"]
+             + " | worst scenario | failures slack/tumble/length | ms/step |",
+             "|---" * (len(TABLE_COLUMNS) + 6) + "|"]
     for name, block in pols.items():
         counts = "/".join(str(block["failures"][f]) for f in FAILURES)
         lines.append(f"| {name} | {block['kind']} | {block['n_runs']} | "
                      + " | ".join(_cell(block, m) for m, _ in TABLE_COLUMNS)
-                     + f" | {counts} |")
+                     + f" | {_worst(block)} | {counts} | {_ms(block)} |")
     if any(v is not None for b in pols.values() for v in b["probability_of_improvement"].values()):
         lines += ["", f"Probability of improvement over {REFERENCE_POLICY} "
                       "(per scenario over pairs of runs, averaged over scenarios)", "",
@@ -239,8 +296,9 @@ def markdown_tables(results: dict) -> str:
             poi = block["probability_of_improvement"]
             lines.append(f"| {name} | " + " | ".join(
                 "n/a" if poi[m] is None else f"{poi[m]:.2f}" for m, _ in TABLE_COLUMNS) + " |")
-    lines += ["", "Per scenario (IQM over runs [95 % bootstrap CI over runs, 2+ runs]): "
-                  "success rate / tracking RMS after orbit 1 [rad]", "",
+    lines += ["", "Per scenario: success (surviving fraction of the runs' episodes) / "
+                  "tracking RMS after orbit 1 [rad] (IQM over runs) [95 % bootstrap CI over "
+                  "runs, 2+ runs]", "",
               "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
     for sc, per in results["per_scenario"].items():
         cells = []

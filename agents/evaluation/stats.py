@@ -16,6 +16,12 @@ training seed); a deterministic baseline is one run.
   (the Mann-Whitney U statistic over n_X n_Y, ties counting 1/2), averaged over the
   scenarios; for metrics where lower is better, improvement means X < Y.
 
+The IQM is for continuous metrics. **Success is never trimmed**: a failed episode is a
+lost mission, and the 25 % cut of an IQM drops the hardest scenario's cells.
+:func:`success_counts` gives the raw fraction of all episodes that survive and the
+worst scenario's; :func:`success_rate_ci` its interval over training runs (the same
+stratified resampling of runs).
+
 NaN entries (a metric undefined for every episode of a run, such as the convergence
 time of a policy that never converges) are left out.
 """
@@ -23,12 +29,14 @@ time of a policy that never converges) are left out.
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from scipy import stats
 
 __all__ = ["iqm", "run_scores", "bootstrap_iqm", "stratified_bootstrap_ci",
-           "probability_of_improvement", "N_BOOTSTRAP", "BOOTSTRAP_SEED"]
+           "probability_of_improvement", "success_counts", "success_rate_ci",
+           "SuccessCounts", "N_BOOTSTRAP", "BOOTSTRAP_SEED"]
 
 N_BOOTSTRAP = 2000
 """Bootstrap resamples of every interval."""
@@ -145,3 +153,66 @@ def probability_of_improvement(x: np.ndarray, y: np.ndarray,
         diff = a[:, None] - b[None, :]
         per_scenario.append(float(((diff > 0) + 0.5 * (diff == 0)).mean()))
     return float(np.mean(per_scenario)) if per_scenario else None
+
+
+class SuccessCounts(NamedTuple):
+    """Surviving and all episodes per (run, scenario) cell, and what they add up to."""
+
+    survived: np.ndarray
+    """(n_runs, n_scenarios) episodes that ran to the time limit without failure."""
+    episodes: np.ndarray
+    """(n_runs, n_scenarios) episodes."""
+
+    @property
+    def rate(self) -> float:
+        """Surviving fraction of all episodes [-] (NaN without episodes)."""
+        total = self.episodes.sum()
+        return float(self.survived.sum() / total) if total else math.nan
+
+    @property
+    def per_scenario(self) -> np.ndarray:
+        """(n_scenarios,) surviving fraction of each scenario's episodes over all runs."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.survived.sum(axis=0) / self.episodes.sum(axis=0)
+
+    def worst(self, scenarios: list) -> tuple[str | None, float]:
+        """(name, surviving fraction) of the scenario with the lowest fraction (first on ties)."""
+        rates = self.per_scenario
+        if not np.isfinite(rates).any():
+            return None, math.nan
+        j = int(np.nanargmin(rates))
+        return scenarios[j], float(rates[j])
+
+
+def success_counts(episodes: list[dict], runs: list, scenarios: list) -> SuccessCounts:
+    """Count surviving episodes (``success`` == 1) per run and scenario."""
+    row = {r: i for i, r in enumerate(runs)}
+    col = {s: j for j, s in enumerate(scenarios)}
+    survived = np.zeros((len(runs), len(scenarios)))
+    total = np.zeros((len(runs), len(scenarios)))
+    for ep in episodes:
+        i, j = row[ep["run"]], col[ep["scenario"]]
+        total[i, j] += 1
+        survived[i, j] += float(ep["success"] == 1)
+    return SuccessCounts(survived, total)
+
+
+def success_rate_ci(counts: SuccessCounts, level: float = 0.95, n_boot: int = N_BOOTSTRAP,
+                    seed: int = BOOTSTRAP_SEED) -> tuple[float, float] | None:
+    """Percentile interval of the surviving fraction over runs, resampled per scenario.
+
+    Each resample draws, for every scenario, ``n_runs`` runs with replacement (as
+    :func:`bootstrap_iqm`) and takes surviving over all episodes of the drawn cells. None
+    with fewer than two runs or no episodes.
+    """
+    n_runs, n_scen = counts.survived.shape
+    if n_runs < 2 or not counts.episodes.sum():
+        return None
+    rng = np.random.default_rng(seed)
+    idx = rng.integers(0, n_runs, size=(n_boot, n_runs, n_scen))
+    cols = np.arange(n_scen)
+    survived = counts.survived[idx, cols].sum(axis=(1, 2))
+    total = counts.episodes[idx, cols].sum(axis=(1, 2))
+    tail = 50.0 * (1.0 - level)
+    lo, hi = np.percentile(survived / total, [tail, 100.0 - tail])
+    return float(lo), float(hi)

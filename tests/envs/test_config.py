@@ -199,7 +199,7 @@ OUT_OF_RANGE = {
     "max_reel_rate": 0.0, "action_mode": "speed", "increment_gain": 3.0, "accel_limit": 0.0,
     "speed_limit": -1.0, "reel_time_constant": 0, "length_bounds": (1.0, 0.0),
     "orbits_per_episode": 0.0, "init_theta_range": -1.0, "init_dtheta_range": -1.0,
-    "init_length_range": -1.0, "obs_noise": -1.0, "disturbance": -1.0,
+    "init_length_range": -1.0, "obs_noise": -1.0, "obs_bias": 0.7, "disturbance": -1.0,
     "eccentricity_range": (0.5, 0.1), "mass_range": 1.0, "observe_params": "masses",
     "reward_weights": {"effort": -1.0}, "render_mode": "x",
 }

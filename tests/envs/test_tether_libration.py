@@ -468,6 +468,32 @@ def test_observing_the_eccentricity_alone_appends_e_and_changes_nothing_else(mak
         assert reward_s == reward_b
 
 
+@pytest.mark.parametrize("obs_noise", [0.0, 1e-3])
+def test_obs_bias_offsets_the_observed_angles_only(make_env, obs_noise):
+    """obs_bias b: observed theta_i and e_i are b above the unbiased env's, nothing else
+    (info, reward, termination, the other entries) changes."""
+    from tether_gym.envs.layout import OBSERVATION
+
+    kwargs = {"init_theta_range": 0.1, "obs_noise": obs_noise}
+    plain, biased = make_env(**kwargs), make_env(obs_bias=0.02, **kwargs)
+    sl = OBSERVATION.slices(2)
+    shifted = np.zeros(plain.observation_space.shape, bool)
+    shifted[sl["theta"]] = shifted[sl["error"]] = True
+    obs_p, info_p = plain.reset(seed=7)
+    obs_b, info_b = biased.reset(seed=7)
+    for step in range(30):
+        diff = obs_b.astype(float) - obs_p.astype(float)
+        np.testing.assert_allclose(diff[shifted], 0.02, atol=1e-6)  # float32 rounding
+        np.testing.assert_array_equal(obs_b[~shifted], obs_p[~shifted])
+        np.testing.assert_array_equal(info_b["theta"], info_p["theta"])
+        action = np.full(2, 0.3 * math.sin(step), np.float32)
+        obs_p, r_p, term_p, _, info_p = plain.step(action)
+        obs_b, r_b, term_b, _, info_b = biased.step(action)
+        assert (r_b, term_b) == (r_p, term_p)
+    with pytest.raises(ValueError, match="obs_bias"):
+        make_env(obs_bias=0.6)
+
+
 @pytest.mark.parametrize("kwargs", [{}, {"n_bodies": 4, "init_theta_range": 0.1,
                                          "gravity": "full", "speed_limit": 3.0}])
 def test_env_step_is_the_public_transition(make_env, kwargs):

@@ -187,6 +187,9 @@ class Randomisation:
         Relative half-width to draw each mass, in [0, 1).
     obs_noise : float
         Standard deviation of the observation noise on theta, theta', l, l'.
+    obs_bias : float
+        Constant offset added to every observed theta_i [rad] (a misaligned attitude
+        sensor), in [-0.5, 0.5].
     disturbance : float
         Bound of the uniform disturbance d on theta'' (paper Eq. 20) [rad/rad^2].
     observe_params : bool, "eccentricity" or None
@@ -201,6 +204,7 @@ class Randomisation:
     eccentricity_range: tuple[float, float] | None = None
     mass_range: float | None = None
     obs_noise: float = 0.0
+    obs_bias: float = 0.0
     disturbance: float = 0.0
     observe_params: bool | str | None = None
 
@@ -209,6 +213,7 @@ class Randomisation:
         check_range("init_dtheta_range", self.init_dtheta_range, 0.0, 10.0)
         check_range("init_length_range", self.init_length_range, 0.0)
         check_range("obs_noise", self.obs_noise, 0.0, 10.0)
+        check_range("obs_bias", self.obs_bias, -0.5, 0.5)
         check_range("disturbance", self.disturbance, 0.0, 100.0)
         object.__setattr__(self, "eccentricity_range",
                            _opt_range("eccentricity_range", self.eccentricity_range, 0.0, 0.99))

@@ -102,7 +102,8 @@ class TetherLibrationEnv(gym.Env):
     (n = N-1.) With the frequency w known, (nu, theta, theta', l, l', u) is the full
     state, so the observation is Markov. ``obs_noise`` adds Gaussian noise of that
     standard deviation to the theta, theta', l and l' entries (and so to the errors
-    and ln l computed from them).
+    and ln l computed from them); ``obs_bias`` adds a constant offset to every
+    observed theta_i (a misaligned sensor). ``info`` holds the true state.
 
     ## Rewards
 
@@ -198,6 +199,7 @@ class TetherLibrationEnv(gym.Env):
     | init_dtheta_range    | 0              | half-width of the theta_i'(0) draw [rad/rad]    |
     | init_length_range    | 0              | half-width of the l_i(0) draw [-]               |
     | obs_noise            | 0              | std of observation noise                        |
+    | obs_bias             | 0              | offset of every observed theta_i [rad]          |
     | disturbance          | 0              | bound of d in theta'' += d (Eq. 20) [rad/rad^2] |
     | eccentricity_range   | None           | (low, high) to draw e per episode               |
     | mass_range           | None           | relative half-width to draw each mass           |
@@ -235,7 +237,8 @@ class TetherLibrationEnv(gym.Env):
       after 100, at a reset or inside a vector env's ``step``) begins an episode
       that is failed from the start (Starting State); every start that 0.4.x drew
       is drawn bitwise the same, so every configuration that worked returns what it
-      returned, and no id changes.
+      returned, and no id changes. tether_gym 0.6.0 adds ``obs_bias`` (0 by default:
+      every configuration that existed before returns what it returned).
     * v0: initial release. tether_gym 0.2.0 keeps v0: with every configuration that
       worked before, trajectories, observations, terminations and info entries are
       bitwise those of 0.1.0, except that the reel acceleration is now computed by one

@@ -72,9 +72,15 @@ def test_results_json_is_strict_with_meta_and_episodes(short_run):
     assert len(res["episodes"]) == 2 * 1 * 1 * 2
     for ep in res["episodes"]:
         assert {"policy", "run", "scenario", "seed"} | set(METRICS) <= set(ep)
-    # the point estimate is the IQM of the runs' means over their episodes
-    succ = [e["success"] for e in res["episodes"] if e["policy"] == "random"]
-    assert res["policies"]["random"]["success"] == pytest.approx(np.mean(succ))
+    # success is the raw surviving fraction of all episodes, with its worst scenario
+    for name, block in res["policies"].items():
+        succ = [e["success"] for e in res["episodes"] if e["policy"] == name]
+        assert block["success"] == block["success_rate"] == sum(succ) / len(succ)
+        assert block["survived"] == sum(succ) and block["n_episodes"] == len(succ)
+        assert block["worst_scenario"] == "paper"  # the only scenario
+        assert block["worst_scenario_success"] == block["success_rate"]
+        # compute per control step: one timed episode, median <= p99, both > 0 ms
+        assert 0 < block["compute_ms_per_step"] <= block["compute_ms_per_step_p99"]
     assert (out / "trajectories.png").is_file() and (out / "metrics.png").is_file()
 
 
@@ -262,11 +268,11 @@ def test_plots_mark_failures_title_the_scenario_and_skip_undefined(tmp_path, mon
     monkeypatch.setattr(Figure, "savefig", lambda self, path, **kw: saved.append(self))
     block = {m: 0.5 for m in METRICS} | {"converge_orbits": math.nan}
     block["ci95"] = {m: (0.4, 0.6) for m in METRICS} | {"converge_orbits": None}
-    results = {"suite": "x", "policies": {"a": block, "b": dict(block)}}
+    results = {"suite": "x", "policies": {"a": block, "b": dict(block)}, "episodes": []}
     scenario = Scenario("windy", "a scenario with a name")
     plot_results(results, {"a": _fake_trajectory("slack"), "b": _fake_trajectory(None)},
                  scenario, tmp_path, log=None)
-    traj_fig, metrics_fig = saved
+    _, traj_fig, metrics_fig = saved
     ax_err = traj_fig.axes[0]
     assert "windy" in ax_err.get_title() and "a scenario with a name" in ax_err.get_title()
     markers = [line for line in ax_err.get_lines() if line.get_marker() == "x"]

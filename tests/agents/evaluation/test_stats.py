@@ -14,6 +14,8 @@ from tether_gym_agents.evaluation.stats import (
     probability_of_improvement,
     run_scores,
     stratified_bootstrap_ci,
+    success_counts,
+    success_rate_ci,
 )
 
 
@@ -87,3 +89,39 @@ def test_probability_of_improvement_without_common_data():
     assert probability_of_improvement(np.array([[np.nan]]), np.array([[1.0]])) is None
     with pytest.raises(ValueError, match="same scenarios"):
         probability_of_improvement(np.ones((2, 3)), np.ones((2, 2)))
+
+
+def _episodes(survived: dict) -> list[dict]:
+    """Episode records from {(run, scenario): [success of each episode]}."""
+    return [{"run": r, "scenario": sc, "success": float(v)}
+            for (r, sc), values in survived.items() for v in values]
+
+
+def test_success_is_the_raw_fraction_and_the_hard_scenario_is_never_trimmed():
+    # 2 runs x 4 scenarios of 10 episodes; scenario "hard" loses 4 + 5 of 20. Of the 8
+    # cells the IQM drops the 2 lowest, both of "hard", and says 1.0; the raw fraction
+    # is 71/80 and the worst scenario 11/20.
+    cells = {(r, sc): [1] * 10 for r in (0, 1) for sc in "abc"}
+    cells[(0, "hard")] = [1] * 6 + [0] * 4
+    cells[(1, "hard")] = [1] * 5 + [0] * 5
+    eps = _episodes(cells)
+    names = ["a", "b", "c", "hard"]
+    assert iqm(run_scores(eps, "success", [0, 1], names)) == 1.0
+    counts = success_counts(eps, [0, 1], names)
+    assert counts.rate == 71 / 80
+    assert counts.worst(names) == ("hard", 11 / 20)
+    np.testing.assert_array_equal(counts.per_scenario, [1.0, 1.0, 1.0, 0.55])
+
+
+def test_success_interval_resamples_runs_per_scenario():
+    cells = {(0, "a"): [1, 1], (1, "a"): [0, 0], (0, "b"): [1, 0], (1, "b"): [1, 0]}
+    counts = success_counts(_episodes(cells), [0, 1], ["a", "b"])
+    assert counts.rate == 0.5
+    lo, hi = success_rate_ci(counts, n_boot=4000)
+    # per scenario a, the 2 drawn runs give 4/4, 2/4 or 0/4 survivors (p 1/4, 1/2,
+    # 1/4); b always gives 2/4: the rate is 6/8, 4/8 or 2/8 -> 2.5 % and 97.5 %
+    # percentiles 0.25 and 0.75
+    assert (lo, hi) == (0.25, 0.75)
+    one_run = success_counts(_episodes({(0, "a"): [1, 0]}), [0], ["a"])
+    assert success_rate_ci(one_run) is None
+    assert one_run.rate == 0.5
