@@ -1,0 +1,70 @@
+"""Every shipped seed's ``command.txt`` retrains it from nothing (issue 26).
+
+Its first line is a fresh ``train.py`` run and every later line resumes the same run
+folder; replayed today, the first line resolves to the hyperparameters, env arguments
+and seed the seed's ``config.yml`` records, and the lines' budgets add up to the env
+steps of its ``train_info.json``.
+"""
+
+from __future__ import annotations
+
+import shlex
+from pathlib import Path
+
+import pytest
+
+from tether_gym.envs import EnvConfig
+from tether_gym_agents.cli.train import build_parser
+from tether_gym_agents.files import pretrained_agents
+from tether_gym_agents.files.run_folder import read_config
+from tether_gym_agents.training.settings import TrainOptions, resolve_settings
+
+REPO = Path(__file__).resolve().parents[3]
+SEEDS = [(name, run) for name, path in sorted(pretrained_agents().items())
+         for run in sorted(Path(path).glob("seed_*"))]
+
+
+def _argv(line: str) -> list[str]:
+    words = shlex.split(line)
+    assert words[:2] == ["python", "train.py"], line
+    return words[2:]
+
+
+def _env(kwargs: dict) -> EnvConfig:
+    return EnvConfig.from_kwargs(**{k: tuple(v) if isinstance(v, list) else v
+                                    for k, v in kwargs.items()})
+
+
+def test_every_shipped_agent_has_seeds():
+    assert {name for name, _ in SEEDS} >= {"ppo", "ppo_symlog", "ppo_g025", "smc_residual"}
+
+
+@pytest.mark.parametrize(("name", "run"), SEEDS, ids=[f"{n}-{r.name}" for n, r in SEEDS])
+def test_command_txt_parses_into_a_from_scratch_run(name, run, tmp_path, monkeypatch):
+    import json
+
+    monkeypatch.chdir(REPO)  # the commands name configs/ relative to a clone
+    lines = [ln for ln in (run / "command.txt").read_text().splitlines() if ln.strip()]
+    args = [build_parser().parse_args(_argv(ln)) for ln in lines]
+    first, later = args[0], args[1:]
+    assert not first.resume and first.seeds is None and first.sweep is None
+    assert first.seed == int(run.name.split("_")[1])
+    assert all(a.resume and a.out == first.out for a in later)  # one folder, continued
+    first.out = str(tmp_path / "run")
+    settings = resolve_settings(TrainOptions.from_namespace(first))
+    recorded = read_config(run)
+    resolved = settings.resolved_config()
+    assert (resolved["algo"], resolved["seed"], resolved["n_envs"]) == (
+        recorded["algo"], recorded["seed"], recorded["n_envs"])
+    hyper = {k: v for k, v in resolved["hyperparams"].items() if k != "env_kwargs"}
+    want = {k: v for k, v in recorded["hyperparams"].items() if k != "env_kwargs"}
+    assert json.loads(json.dumps(hyper)) == json.loads(json.dumps(want))
+    assert _env(resolved["env_kwargs"]) == _env(recorded["env_kwargs"])
+    # budgets: the first call's n_timesteps, then each resume's --timesteps, in whole
+    # rollouts of n_steps x n_envs
+    budget = settings.timesteps + sum(a.timesteps for a in later)
+    info = json.loads((run / "train_info.json").read_text())
+    steps = info["num_timesteps"]
+    assert info["wall_time_s"] > 0  # every call's time, killed parts included
+    rollout = recorded["hyperparams"]["n_steps"] * recorded["n_envs"]
+    assert budget <= steps < budget + rollout * (1 + len(later))
