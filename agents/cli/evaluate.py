@@ -1,9 +1,11 @@
-"""``python evaluate.py``: benchmark policies, or reproduce the paper (``evaluate.py paper``).
+"""``python evaluate.py``: benchmark policies, learning curves, or reproduce the paper.
 
 ``evaluate.py [bench] [policies] [options]`` (the default command) checks every argument,
 then runs :func:`tether_gym_agents.evaluation.benchmark.evaluate` and prints its tables;
 ``evaluate.py paper --out DIR`` (alias ``--paper``) runs
-:func:`tether_gym_agents.paper.cli.run`. A policy name is anything the policy registry
+:func:`tether_gym_agents.paper.cli.run`; ``evaluate.py curves RUNS... --out DIR``
+evaluates every checkpoint of folders of seed runs on a suite
+(:mod:`tether_gym_agents.evaluation.curves`). A policy name is anything the policy registry
 resolves (:mod:`tether_gym_agents.evaluation.registry`), including the policies that user
 code registered with :func:`tether_gym_agents.register_policy` before calling
 :func:`main`. A bad argument, such as an unknown policy, is one ``evaluate.py: error:``
@@ -13,6 +15,7 @@ line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import math
 import shlex
 import sys
 import textwrap
@@ -37,13 +40,15 @@ from ..evaluation.scenarios import describe_suites, get_suite
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = ("bench", "paper")
+COMMANDS = ("bench", "paper", "curves")
 NOTES = (
     "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
     "description: ..., env_kwargs: {...}, nominal: {masses: [...], eccentricity: ...}}]'.",
-    "The table reports, per policy, the interquartile mean over training runs x "
-    "scenarios of each run's mean over its episodes, with a 95 % stratified-bootstrap "
-    "interval (2 runs or more) and the probability of improvement over smc.",
+    "The table reports, per policy, success as the surviving fraction of all episodes "
+    "(and its worst scenario), every other metric as the interquartile mean over training "
+    "runs x scenarios of each run's mean over its episodes, with 95 % stratified-bootstrap "
+    "intervals (2 runs or more), the compute time per control step, and the probability "
+    "of improvement over smc.",
     "Scenarios are defined for any number of bodies (per-tether values follow n_bodies, "
     "agents/evaluation/scenarios.py). Trained agents run on the n_bodies, amplitude, "
     "frequency and control_step their agent.json records, for every policy of the call, "
@@ -97,7 +102,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Benchmark policies on tether_gym scenario suites (evaluate.py [bench] "
                     "...), or reproduce the paper's figures (evaluate.py paper ...).",
         epilog=epilog)
-    sub = top.add_subparsers(dest="command", metavar="{bench,paper}")
+    sub = top.add_subparsers(dest="command", metavar="{bench,paper,curves}")
     bench = sub.add_parser("bench", help="benchmark policies (the default command)",
                            prog="evaluate.py [bench]", epilog=epilog,
                            formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -109,6 +114,23 @@ def build_parser() -> argparse.ArgumentParser:
                                        "tether_gym and write paper_vs_tether_gym.md/.json "
                                        "beside the PNG figures.")
     add_paper_arguments(paper)
+    curves = sub.add_parser("curves", help="learning curves: every checkpoint of seed runs, "
+                                           "scored on a suite, against steps and wall time",
+                            prog="evaluate.py curves",
+                            description="Evaluate the checkpoint agents "
+                                        "(checkpoints/agent_<N>_steps/) of folders of seed "
+                                        "runs on a suite, as the benchmark scores a policy; "
+                                        "write curves.json, curves.md and curves.png.")
+    curves.add_argument("runs", nargs="+", type=Path,
+                        help="folders of seed_K run folders written by train.py")
+    curves.add_argument("--suite", default="default", help="scenario suite (default: default)")
+    curves.add_argument("--seeds", type=int, default=10,
+                        help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
+    curves.add_argument("--rms", type=float, default=5.5e-3,
+                        help="threshold tracking RMS [rad] (default 5.5e-3)")
+    curves.add_argument("--success", type=float, default=0.99,
+                        help="threshold success fraction (default 0.99)")
+    curves.add_argument("--out", type=Path, required=True, help="output folder")
     return top
 
 
@@ -173,4 +195,35 @@ def main(argv=None) -> int:
         from ..paper.cli import run as paper_run
 
         return paper_run(args)
+    if args.command == "curves":
+        return _curves(args)
     return _bench(args, command)
+
+
+def _curves(args: argparse.Namespace) -> int:
+    """Run the curves command; print each policy's table. Returns the exit code."""
+    from ..evaluation.curves import Threshold, learning_curves, markdown, write_curves
+
+    try:
+        check_int("--seeds", args.seeds, 1, MAX_SEEDS)
+        get_suite(args.suite)
+        if not (math.isfinite(args.rms) and args.rms > 0):
+            raise ValueError(f"--rms {args.rms!r} must be a finite threshold > 0 [rad]")
+        if not 0.0 <= args.success <= 1.0:
+            raise ValueError(f"--success {args.success!r} must be a fraction in [0, 1]")
+        for run in args.runs:
+            if not run.is_dir():
+                raise ValueError(f"{run} is not a folder of seed runs")
+        check_out_dir(args.out)
+        threshold = Threshold(args.rms, args.success)
+        all_curves = []
+        for run in args.runs:
+            print(f"{run}: evaluating its checkpoints on suite {args.suite!r} ...")
+            all_curves.append(learning_curves(run, args.suite, args.seeds, threshold))
+            print(markdown(all_curves[-1]))
+    except ValueError as exc:
+        print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        return 2
+    for path in write_curves(all_curves, args.out):
+        print(f"wrote {path}")
+    return 0

@@ -12,6 +12,8 @@ Modules by job:
   probability of improvement over training runs.
 * :mod:`.benchmark`: :func:`~.benchmark.evaluate`, policies x scenarios x runs x seeds.
 * :mod:`.results`: ``results.json`` and the printed tables; :mod:`.plots`: the figures.
+* :mod:`.curves`: learning curves on a suite, every checkpoint of seed runs scored as
+  the benchmark scores a policy, against env steps and wall-clock time.
 
 The command line (``evaluate.py``) is :mod:`tether_gym_agents.cli.evaluate`.
 """

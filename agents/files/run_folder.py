@@ -67,17 +67,18 @@ from typing import Any
 import numpy as np
 
 from ..common.jsonio import to_jsonable
+from .safe_format import AGENT_FILE
 
 __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_DIR",
            "EVALUATIONS_FILE", "LEARNING_CURVE_FILE", "TB_DIR", "FINAL_AGENT_DIR",
            "BEST_MODEL_FILE", "FINAL_MODEL_FILE", "VECNORMALIZE_FILE", "REPLAY_BUFFER_FILE",
-           "CHECKPOINT_DIR", "CHECKPOINT_PREFIX", "TRAIN_LOG_FILE", "SEED_CURVES_FILE",
+           "CHECKPOINT_DIR", "CHECKPOINT_PREFIX", "CHECKPOINT_AGENT_PREFIX", "TRAIN_LOG_FILE", "SEED_CURVES_FILE",
            "FANOUT_LOG_FILE", "SavedModel", "DamagedFileError", "atomic_target",
            "last_write_time", "evaluation_arrays", "evaluation_rows", "write_text_atomic",
            "yaml_text", "write_train_info",
            "read_train_info", "trained_steps", "write_config", "read_config", "write_args",
            "append_command", "evaluations_path", "read_evaluations", "write_evaluations",
-           "saved_models", "checkpoint_steps", "seed_dir", "seed_runs"]
+           "saved_models", "checkpoint_steps", "checkpoint_agents", "seed_dir", "seed_runs"]
 
 CONFIG_FILE = "config.yml"
 ARGS_FILE = "args.yml"
@@ -97,6 +98,10 @@ CHECKPOINT_DIR = "checkpoints"
 CHECKPOINT_PREFIX = "model"
 """``CheckpointCallback(name_prefix=...)``: its files are ``model_<N>_steps.zip``,
 ``model_vecnormalize_<N>_steps.pkl`` and ``model_replay_buffer_<N>_steps.pkl``."""
+CHECKPOINT_AGENT_PREFIX = "agent"
+"""Each checkpoint's policy as a safe agent folder, ``checkpoints/agent_<N>_steps/``,
+whose ``agent.json`` records the steps and the run's wall time then (learning curves
+against wall-clock time, evaluated afterwards on any suite)."""
 TRAIN_LOG_FILE = "train.log"
 SEED_CURVES_FILE = "learning_curves.png"
 FANOUT_LOG_FILE = "fanout.log"
@@ -353,6 +358,23 @@ def saved_models(run: Path) -> list[SavedModel]:
                                 ckpt.parent / f"{prefix}_replay_buffer_{tag}_steps.pkl",
                                 int(tag)))
     return found
+
+
+def checkpoint_agents(run: Path) -> list[tuple[int, Path]]:
+    """``(N, folder)`` of every ``checkpoints/agent_<N>_steps/`` of a run, by N.
+
+    A folder without its ``agent.json`` (a call killed while writing it) is left out.
+    """
+    folder = Path(run) / CHECKPOINT_DIR
+    if not folder.is_dir():
+        return []
+    found = []
+    for path in folder.iterdir():
+        match = _STEPS_IN_NAME.search(path.name)
+        if (match and path.name.startswith(CHECKPOINT_AGENT_PREFIX + "_")
+                and (path / AGENT_FILE).is_file()):
+            found.append((int(match.group(1)), path))
+    return sorted(found)
 
 
 def checkpoint_steps(run: Path) -> int:

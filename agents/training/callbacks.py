@@ -29,6 +29,7 @@ from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback,
 
 from ..files.run_folder import (
     BEST_MODEL_FILE,
+    CHECKPOINT_AGENT_PREFIX,
     CHECKPOINT_DIR,
     CHECKPOINT_PREFIX,
     EVAL_DIR,
@@ -74,16 +75,20 @@ def save_buffer(model, path: Path) -> None:
         model.save_replay_buffer(tmp)
 
 
-def save_safe_agent(settings: TrainSettings, model, env, folder: str) -> None:
+def save_safe_agent(settings: TrainSettings, model, env, folder: str,
+                    wall_time_s: float | None = None) -> None:
     """Write the model's policy and ``env``'s observation statistics as a safe agent.
 
     ``folder`` is relative to the run folder (``"."``: the best agent at its top,
-    ``"final_agent"``: the agent at the last step). The files are written into a
-    hidden temporary folder beside it and each renamed into place (a kill leaves every
-    file whole).
+    ``"final_agent"``: the agent at the last step, ``checkpoints/agent_<N>_steps``). The
+    files are written into a hidden temporary folder beside it and each renamed into
+    place (a kill leaves every file whole). ``wall_time_s``, the run's wall time at
+    this point [s] (all its calls), goes into the ``training`` record when given.
     """
     training = {"seed": settings.seed, "command": settings.command_line,
                 "num_timesteps": int(model.num_timesteps)}
+    if wall_time_s is not None:
+        training["wall_time_s"] = round(float(wall_time_s), 1)
     target = (settings.out / folder).resolve()
     target.mkdir(parents=True, exist_ok=True)
     tmp = target / f".tmp-agent-{os.getpid()}"
@@ -174,7 +179,16 @@ class RunCheckpointCallback(CheckpointCallback):
 
     A checkpoint's model file exists only once its statistics and buffer do, so a
     kill during a save leaves the previous checkpoint as the newest complete one.
+    With ``settings`` and ``clock``, each checkpoint's policy is also written as a safe
+    agent, ``checkpoints/agent_<N>_steps/``, recording the run's wall time then (what
+    the learning curves against wall-clock time evaluate).
     """
+
+    def __init__(self, *args, settings: TrainSettings | None = None,
+                 clock: RunClock | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.settings = settings
+        self.clock = clock
 
     def _on_step(self) -> bool:
         if self.n_calls % self.save_freq != 0:
@@ -185,6 +199,11 @@ class RunCheckpointCallback(CheckpointCallback):
         if self.save_replay_buffer and getattr(self.model, "replay_buffer", None) is not None:
             save_buffer(self.model, Path(self._checkpoint_path("replay_buffer_", extension="pkl")))
         save_model(self.model, Path(self._checkpoint_path(extension="zip")))
+        if self.settings is not None and self.clock is not None:
+            folder = f"{CHECKPOINT_DIR}/{CHECKPOINT_AGENT_PREFIX}_{self.num_timesteps}_steps"
+            save_safe_agent(self.settings, self.model,
+                            stats if stats is not None else self.training_env, folder,
+                            wall_time_s=self.clock.elapsed())
         return True
 
 
@@ -211,9 +230,13 @@ class RunClock:
                           "command": settings.command_line,
                           "tether_gym": _tether_gym_version()}
 
+    def elapsed(self) -> float:
+        """The run's wall time so far, earlier calls included [s]."""
+        return self.previous_wall + (time.perf_counter() - self.t0)
+
     def write(self, status: str, num_timesteps: int) -> float:
         """Write ``train_info.json`` with ``status``; return the run's wall time [s]."""
-        wall = self.previous_wall + (time.perf_counter() - self.t0)
+        wall = self.elapsed()
         write_train_info(self.settings.out, {**self.info_base, "status": status,
                                              "num_timesteps": int(num_timesteps),
                                              "wall_time_s": round(wall, 1),
@@ -273,6 +296,6 @@ def make_callbacks(settings: TrainSettings, eval_env, clock: RunClock,
     checkpoints = RunCheckpointCallback(
         save_freq=max(settings.checkpoint_freq // settings.n_envs, 1),
         save_path=str(settings.out / CHECKPOINT_DIR), name_prefix=CHECKPOINT_PREFIX,
-        save_vecnormalize=True, save_replay_buffer=off_policy)
+        save_vecnormalize=True, save_replay_buffer=off_policy, settings=settings, clock=clock)
     return RunCallbacks(RunEvalCallback(eval_env, settings), checkpoints,
                         ProgressCallback(clock))

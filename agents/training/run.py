@@ -142,7 +142,7 @@ def train(settings: TrainSettings) -> RunSummary:
     if hasattr(model, "replay_buffer"):
         save_buffer(model, out / REPLAY_BUFFER_FILE)
     save_model(model, out / FINAL_MODEL_FILE)  # last: a final model has its other files
-    save_safe_agent(settings, model, env, FINAL_AGENT_DIR)
+    save_safe_agent(settings, model, env, FINAL_AGENT_DIR, wall_time_s=clock.elapsed())
     total_wall = callbacks.progress.write("finished")
     plot_learning_curve(out)
     venv.close()

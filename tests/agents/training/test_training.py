@@ -10,6 +10,7 @@ import yaml
 
 from tether_gym_agents.cli.evaluate import main as evaluate_main
 from tether_gym_agents.cli.train import main
+from tether_gym_agents.files.run_folder import checkpoint_agents
 from tether_gym_agents.files.trained import TrainedAgent
 from tether_gym_agents.training.config import ConfigError, load_hyperparams, parse_env_kwargs
 
@@ -38,6 +39,19 @@ def test_train_then_evaluate(tmp_path, algo):
     assert info["num_timesteps"] >= 512 and info["seed"] == 0
     curve = np.load(out / "eval" / "evaluations.npz")
     assert curve["timesteps"].size >= 1
+    # each checkpoint's policy as a safe agent recording its steps and wall time,
+    # increasing along the run (learning curves against wall-clock time)
+    ckpts = checkpoint_agents(out)
+    assert [n for n, _ in ckpts] == sorted(n for n, _ in ckpts) and len(ckpts) >= 2
+    walls = []
+    for steps, folder in ckpts:
+        training = json.loads((folder / "agent.json").read_text())["training"]
+        assert training["num_timesteps"] == steps
+        walls.append(training["wall_time_s"])
+        TrainedAgent.load(folder)  # loads as any agent folder
+    assert walls == sorted(walls) and 0 <= walls[0] <= info["wall_time_s"]
+    final = json.loads((out / "final_agent" / "agent.json").read_text())["training"]
+    assert final["wall_time_s"] <= info["wall_time_s"]
     # the saved agent acts on the env it was trained on, through evaluate.py's main
     rc = evaluate_main([str(out), "smc", "--suite", "paper", "--seeds", "2",
                         "--out", str(tmp_path / "eval"), "--no-plots"])

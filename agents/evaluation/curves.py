@@ -1,0 +1,227 @@
+"""Learning curves on the benchmark itself, against env steps and wall-clock time.
+
+A training run writes each checkpoint's policy as a safe agent folder that records its
+env steps and the run's wall time then (``checkpoints/agent_<N>_steps/``, see
+:mod:`tether_gym_agents.files.run_folder`). :func:`learning_curves` evaluates them
+afterwards, on a scenario suite (the default one unless told), exactly as
+``python evaluate.py`` scores a policy: at every checkpoint step that all seeds have
+reached, the seeds' checkpoints form one policy with one run per seed, so each point is
+the same statistic as the benchmark table (success: surviving fraction of all episodes;
+tracking RMS: IQM over runs x scenarios, with its 95 % stratified-bootstrap interval).
+Nothing of the training (its evaluation env, its best-agent choice) is used.
+
+**Time to threshold.** The first checkpoint at which the policy (all its seeds together)
+reaches a tracking RMS <= ``rms`` with a success >= ``success``; its env steps and the
+median (and range) over seeds of their wall time at that checkpoint; and, per seed, the
+first checkpoint where that seed alone meets both (its own success fraction and its IQM
+over the scenarios).
+
+``python evaluate.py curves RUNS... --out DIR`` writes ``curves.json``, ``curves.md``
+(one compact table per policy) and ``curves.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..files.run_folder import checkpoint_agents, seed_runs
+from .benchmark import EvalOptions, evaluate
+from .stats import iqm, run_scores, success_counts
+
+__all__ = ["Threshold", "learning_curves", "curve_points", "write_curves", "DEFAULT_THRESHOLD"]
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """What "reached" means: tracking RMS <= ``rms`` [rad] with success >= ``success`` [-]."""
+
+    rms: float = 5.5e-3
+    success: float = 0.99
+
+    def met(self, rms: float | None, success: float | None) -> bool:
+        """Whether a point (RMS, success) meets the threshold (None/NaN never does)."""
+        return (rms is not None and success is not None and math.isfinite(rms)
+                and rms <= self.rms and success >= self.success)
+
+
+DEFAULT_THRESHOLD = Threshold()
+"""5.5e-3 rad at >= 0.99 success: the fast-PPO target of the benchmark's issue tracker."""
+
+
+def curve_points(folder: Path) -> list[tuple[int, list[tuple[Path, float]]]]:
+    """``(steps, [(agent folder, wall time [s]) per seed])`` for the steps all seeds have.
+
+    ``folder`` is a folder of ``seed_K`` run folders (or one run folder).
+    """
+    runs = seed_runs(folder) or [Path(folder)]
+    per_run = []
+    for run in runs:
+        points = {}
+        for steps, agent in checkpoint_agents(run):
+            training = json.loads((agent / "agent.json").read_text()).get("training", {})
+            points[steps] = (agent, float(training.get("wall_time_s", math.nan)))
+        per_run.append(points)
+    common = sorted(set.intersection(*(set(p) for p in per_run))) if per_run else []
+    return [(steps, [p[steps] for p in per_run]) for steps in common]
+
+
+def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
+                    threshold: Threshold = DEFAULT_THRESHOLD, log=print) -> dict:
+    """Evaluate every common checkpoint of a folder of seed runs on ``suite``.
+
+    Returns ``{"policy", "suite", "seeds", "runs", "threshold", "points": [...],
+    "reached": {...} or None, "per_seed": [...]}``; each point holds ``steps``,
+    ``wall_time_s`` (per seed), ``success``, ``survived``, ``episodes``,
+    ``tracking_rms`` (IQM), ``tracking_rms_ci95`` and the per-seed ``seed_success`` and
+    ``seed_tracking_rms``.
+    """
+    points = curve_points(folder)
+    if not points:
+        raise ValueError(f"{folder}: no checkpoint agents (checkpoints/agent_<N>_steps/) "
+                         "that every seed run has; train with this version of train.py")
+    out = []
+    tmp = Path(tempfile.mkdtemp(prefix="tether_curves_"))
+    try:
+        for k, (steps, agents) in enumerate(points, 1):
+            for i, (agent, _) in enumerate(agents):  # one policy, one run per seed
+                shutil.copytree(agent, tmp / f"step_{steps}" / f"seed_{i}")
+            res = evaluate([str(tmp / f"step_{steps}")], suite, n_seeds, 0,
+                           options=EvalOptions(out=None, plots=False, log=None))
+            out.append(_point(res, steps, [w for _, w in agents]))
+            if log:
+                p = out[-1]
+                log(f"  [{k}/{len(points)}] {steps} steps: success {p['success']:.3f}, "
+                    f"tracking RMS {p['tracking_rms']:.3g} rad")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    n_runs = len(points[0][1])
+    return {"policy": str(folder), "suite": suite, "seeds": n_seeds, "runs": n_runs,
+            "threshold": {"rms": threshold.rms, "success": threshold.success},
+            "points": out, "reached": _reached(out, threshold),
+            "per_seed": [_seed_reached(out, i, threshold) for i in range(n_runs)]}
+
+
+def _point(res: dict, steps: int, walls: list[float]) -> dict:
+    (block,) = res["policies"].values()
+    eps = res["episodes"]
+    scenarios = list(res["scenarios"])
+    runs = list(range(block["n_runs"]))
+    rms = run_scores(eps, "tracking_rms", runs, scenarios)
+    counts = success_counts(eps, runs, scenarios)
+    seed_success = (counts.survived.sum(axis=1) / counts.episodes.sum(axis=1)).tolist()
+    return {"steps": int(steps), "wall_time_s": walls, "success": block["success_rate"],
+            "survived": block["survived"], "episodes": block["n_episodes"],
+            "tracking_rms": block["tracking_rms"],
+            "tracking_rms_ci95": block["ci95"]["tracking_rms"],
+            "seed_success": seed_success, "seed_tracking_rms": [iqm(r) for r in rms]}
+
+
+def _reached(points: list[dict], threshold: Threshold) -> dict | None:
+    for p in points:
+        if threshold.met(p["tracking_rms"], p["success"]):
+            walls = [w for w in p["wall_time_s"] if math.isfinite(w)]
+            return {"steps": p["steps"],
+                    "wall_time_s_median": float(np.median(walls)) if walls else None,
+                    "wall_time_s_range": [min(walls), max(walls)] if walls else None}
+    return None
+
+
+def _seed_reached(points: list[dict], i: int, threshold: Threshold) -> dict | None:
+    for p in points:
+        if threshold.met(p["seed_tracking_rms"][i], p["seed_success"][i]):
+            return {"steps": p["steps"], "wall_time_s": p["wall_time_s"][i]}
+    return None
+
+
+def _fmt(x, spec: str) -> str:
+    return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def markdown(curves: dict) -> str:
+    """A compact table of one policy's curve and its time to threshold."""
+    th = curves["threshold"]
+    lines = [f"{curves['policy']}: suite {curves['suite']!r}, {curves['runs']} runs x "
+             f"{curves['seeds']} seeds per scenario", "",
+             "| env steps | wall time [min], median (range) | success | tracking RMS [rad] "
+             "[95 % CI] |", "|---|---|---|---|"]
+    for p in curves["points"]:
+        walls = [w for w in p["wall_time_s"] if math.isfinite(w)]
+        wall = (f"{np.median(walls) / 60:.1f} ({min(walls) / 60:.1f}-{max(walls) / 60:.1f})"
+                if walls else "n/a")
+        ci = p["tracking_rms_ci95"]
+        ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
+        lines.append(f"| {p['steps']} | {wall} | {p['success']:.3f} ({p['survived']}/"
+                     f"{p['episodes']}) | {_fmt(p['tracking_rms'], '.2e')}{ci_text} |")
+    reached = curves["reached"]
+    target = f"tracking RMS <= {th['rms']:g} rad at success >= {th['success']:g}"
+    if reached is None:
+        lines += ["", f"Not reached: {target}."]
+    else:
+        lo, hi = reached["wall_time_s_range"] or (math.nan, math.nan)
+        lines += ["", f"Reached ({target}) at {reached['steps']} env steps, "
+                      f"{_fmt((reached['wall_time_s_median'] or math.nan) / 60, '.1f')} min "
+                      f"median wall time ({lo / 60:.1f}-{hi / 60:.1f} over the seeds)."]
+    seeds = [s for s in curves["per_seed"] if s is not None]
+    lines.append(f"Seeds reaching it alone: {len(seeds)} of {curves['runs']}" + (
+        f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min" if seeds
+        else "") + ".")
+    return "\n".join(lines)
+
+
+def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
+    """``curves.json``, ``curves.md`` and (with matplotlib) ``curves.png`` into ``out``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    from ..common.jsonio import to_jsonable
+
+    paths = [out / "curves.json", out / "curves.md"]
+    paths[0].write_text(json.dumps(to_jsonable(all_curves), indent=1, allow_nan=False) + "\n")
+    paths[1].write_text("\n\n".join(markdown(c) for c in all_curves) + "\n")
+    try:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+    except ImportError:
+        if log:
+            log("  (curves.png skipped: matplotlib is missing; pip install \"matplotlib>=3.7\")")
+        return paths
+    fig = Figure(figsize=(12, 4.5), layout="constrained")
+    FigureCanvasAgg(fig)
+    ax_steps, ax_wall, ax_succ = fig.subplots(1, 3)
+    for k, c in enumerate(all_curves):
+        pts = c["points"]
+        steps = np.array([p["steps"] for p in pts], dtype=float)
+        wall = np.array([np.nanmedian(p["wall_time_s"]) for p in pts]) / 60.0
+        rms = np.array([np.nan if p["tracking_rms"] is None else p["tracking_rms"]
+                        for p in pts])
+        ci = np.array([(np.nan, np.nan) if p["tracking_rms_ci95"] is None
+                       else p["tracking_rms_ci95"] for p in pts], dtype=float)
+        label = Path(c["policy"]).name
+        for ax, x in ((ax_steps, steps), (ax_wall, wall)):
+            ax.semilogy(x, rms, "-o", ms=3, color=f"C{k}", label=label)
+            ax.fill_between(x, ci[:, 0], ci[:, 1], color=f"C{k}", alpha=0.25)
+        ax_succ.plot(steps, [p["success"] for p in pts], "-o", ms=3, color=f"C{k}",
+                     label=label)
+    th = all_curves[0]["threshold"] if all_curves else {"rms": math.nan, "success": math.nan}
+    for ax in (ax_steps, ax_wall):
+        ax.axhline(th["rms"], color="grey", ls="--", lw=1)
+        ax.set_ylabel("tracking RMS after orbit 1 [rad], IQM and 95 % CI")
+        ax.grid(True, which="both", alpha=0.3)
+    ax_steps.set_xlabel("env steps")
+    ax_wall.set_xlabel("wall-clock time [min] (median over seeds)")
+    ax_succ.axhline(th["success"], color="grey", ls="--", lw=1)
+    ax_succ.set_xlabel("env steps")
+    ax_succ.set_ylabel("success (surviving fraction of all episodes)")
+    ax_succ.grid(True, alpha=0.3)
+    ax_steps.legend(fontsize=8)
+    fig.suptitle(f"Learning curves on suite {all_curves[0]['suite'] if all_curves else ''!r}"
+                 " (checkpoints evaluated afterwards; dashed: the threshold)", fontsize=10)
+    paths.append(out / "curves.png")
+    fig.savefig(paths[-1], dpi=100)
+    return paths

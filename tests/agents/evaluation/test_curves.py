@@ -1,0 +1,72 @@
+"""evaluate.py curves: every checkpoint of seed runs scored on a suite, with wall times."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import pytest
+
+from tether_gym_agents.cli.evaluate import main as evaluate_main
+from tether_gym_agents.cli.train import main as train_main
+from tether_gym_agents.evaluation.curves import Threshold, _reached, _seed_reached
+
+TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
+        "--eval-episodes", "1", "--timesteps", "512", "--env-kwargs",
+        "orbits_per_episode=0.05"]
+
+
+@pytest.fixture(scope="module")
+def two_seeds(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("runs") / "ppo"
+    for seed in (0, 1):
+        assert train_main(["--seed", str(seed), "--out", str(folder / f"seed_{seed}"),
+                           *TINY]) == 0
+    return folder
+
+
+def test_curves_score_every_common_checkpoint_like_the_benchmark(two_seeds, tmp_path):
+    out = tmp_path / "curves"
+    assert evaluate_main(["curves", str(two_seeds), "--suite", "paper", "--seeds", "2",
+                          "--out", str(out)]) == 0
+    (curve,) = json.loads((out / "curves.json").read_text())
+    steps = [p["steps"] for p in curve["points"]]
+    assert steps == sorted(steps) and steps[0] == 256 and len(steps) >= 2
+    assert curve["runs"] == 2 and curve["suite"] == "paper"
+    for p in curve["points"]:
+        assert p["episodes"] == 2 * 2  # 2 runs x 1 scenario x 2 seeds, none trimmed
+        assert p["success"] == p["survived"] / p["episodes"]
+        assert len(p["wall_time_s"]) == 2 and all(w >= 0 for w in p["wall_time_s"])
+        assert len(p["seed_success"]) == len(p["seed_tracking_rms"]) == 2
+    for i in (0, 1):  # each seed's wall time grows along its checkpoints
+        walls = [p["wall_time_s"][i] for p in curve["points"]]
+        assert walls == sorted(walls)
+    assert (out / "curves.md").read_text().startswith(str(two_seeds))
+    assert (out / "curves.png").is_file()
+
+
+def test_curves_refuse_bad_arguments(tmp_path, capsys):
+    for argv, words in ((["curves", str(tmp_path / "none"), "--out", str(tmp_path)],
+                         "not a folder of seed runs"),
+                        (["curves", str(tmp_path), "--rms", "nan", "--out", str(tmp_path)],
+                         "--rms"),
+                        (["curves", str(tmp_path), "--success", "2", "--out", str(tmp_path)],
+                         "--success")):
+        assert evaluate_main(argv) == 2
+        assert words in capsys.readouterr().err
+    assert evaluate_main(["curves", str(tmp_path), "--out", str(tmp_path / "o")]) == 2
+    assert "no checkpoint agents" in capsys.readouterr().err
+
+
+def test_time_to_threshold_is_the_first_point_meeting_both():
+    th = Threshold(rms=1e-2, success=0.99)
+    points = [{"steps": 1, "tracking_rms": 5e-3, "success": 0.9, "wall_time_s": [10, 20],
+               "seed_tracking_rms": [5e-3, 5e-3], "seed_success": [1.0, 0.8]},
+              {"steps": 2, "tracking_rms": 2e-2, "success": 1.0, "wall_time_s": [30, 40],
+               "seed_tracking_rms": [2e-2, 2e-2], "seed_success": [1.0, 1.0]},
+              {"steps": 3, "tracking_rms": 8e-3, "success": 1.0, "wall_time_s": [50, 70],
+               "seed_tracking_rms": [8e-3, math.nan], "seed_success": [1.0, 1.0]}]
+    assert _reached(points, th) == {"steps": 3, "wall_time_s_median": 60.0,
+                                    "wall_time_s_range": [50, 70]}
+    assert _seed_reached(points, 0, th) == {"steps": 1, "wall_time_s": 10}
+    assert _seed_reached(points, 1, th) is None  # never both, NaN never meets
