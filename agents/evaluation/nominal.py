@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from .scenarios import Scenario
 
-__all__ = ["nominal_smc", "nominal_filter", "filtered_smc", "residual", "handover"]
+__all__ = ["nominal_smc", "nominal_filter", "filtered_smc", "nominal_predictive", "nominal_mpc",
+           "residual", "handover"]
 
 
 def nominal_smc(env, scenario: Scenario):
@@ -24,11 +25,13 @@ def nominal_smc(env, scenario: Scenario):
     from ..baselines.smc import SlidingModeController
 
     nominal = None
-    if scenario.nominal is not None:
+    given = scenario.nominal or {}
+    if "masses" in given or "eccentricity" in given:  # the law has no reel model
         from tether_gym.physics import TetherChain
 
         cfg = env.unwrapped.config
-        nominal = TetherChain(scenario.nominal["masses"], scenario.nominal["eccentricity"],
+        nominal = TetherChain(given.get("masses", cfg.masses),
+                              given.get("eccentricity", cfg.eccentricity),
                               cfg.gravity, cfg.scales.length_ratio)
     return SlidingModeController.for_env(env, nominal=nominal, use_observed_params=False)
 
@@ -45,6 +48,34 @@ def filtered_smc(env, scenario: Scenario):
     from ..hybrids.policies import FilteredPolicy
 
     return FilteredPolicy(nominal_smc(env, scenario), nominal_filter(env, scenario))
+
+
+def nominal_predictive(env, scenario: Scenario):
+    """``predictive``: the one-step predictive law on the nominal model, behind the filter.
+
+    :class:`~tether_gym_agents.baselines.predictive.OneStepPredictive` predicts with the
+    nominal step (``scenario.nominal``, else the env's own model) and the safety filter
+    predicts with the same model.
+    """
+    from ..baselines.predictive import OneStepPredictive
+    from ..hybrids.policies import FilteredPolicy
+
+    law = OneStepPredictive.for_env(env, scenario.nominal)
+    return FilteredPolicy(law, nominal_filter(env, scenario))
+
+
+def nominal_mpc(env, scenario: Scenario, seed: int | None = None):
+    """``mpc``: the model-predictive controller on the nominal model, behind the filter.
+
+    One object per episode (``seed`` is not used: the controller is deterministic, but
+    it keeps its last plan as the next warm start). Needs CasADi (``pip install
+    "tether_gym[mpc]"``); ModuleNotFoundError with that command otherwise.
+    """
+    from ..baselines.mpc import ModelPredictiveController
+    from ..hybrids.policies import FilteredPolicy
+
+    law = ModelPredictiveController.for_env(env, scenario.nominal)
+    return FilteredPolicy(law, nominal_filter(env, scenario))
 
 
 def residual(agent, env, scenario: Scenario):

@@ -4,10 +4,11 @@ A policy name is, in the order tried:
 
 1. a **registered policy**: the built-in baselines (see :data:`BASELINES`; the
    sliding-mode law of the paper, alone and behind the model-based safety filter of
-   :mod:`tether_gym.safety`, and open-loop laws; all commanding reel rates,
-   ``action_mode="rate"``) and whatever :func:`register_policy` added, in user code or
-   in a plugin package (entry-point group :data:`ENTRY_POINT_GROUP`, loaded the first
-   time a name is not found);
+   :mod:`tether_gym.safety`, open-loop laws, the one-step ``predictive`` law and the
+   nonlinear ``mpc`` (needs CasADi; run only when named, :data:`OPT_IN`); all
+   commanding reel rates, ``action_mode="rate"``) and whatever :func:`register_policy`
+   added, in user code or in a plugin package (entry-point group
+   :data:`ENTRY_POINT_GROUP`, loaded the first time a name is not found);
 2. ``handover:AGENT`` (e.g. ``handover:ppo``): the hybrid
    :class:`~tether_gym_agents.hybrids.policies.HandoverPolicy` of a trained agent, which
    steers the transient and hands over to the sliding-mode law inside its boundary
@@ -48,9 +49,9 @@ from .scenarios import Scenario
 
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
            "registered_policies", "resolve_policy", "make_policy", "default_policies",
-           "shipped_agents", "load_plugins", "BASELINES", "HANDOVER", "HANDOVER_OF",
-           "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS", "TRAINED_ON_KEYS",
-           "trained_on"]
+           "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
+           "HANDOVER_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
+           "TRAINED_ON_KEYS", "trained_on"]
 
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
@@ -188,9 +189,17 @@ _BUILT_IN = (
     # a generator per episode, seeded with its env seed: its actions do not depend on
     # the other episodes
     PolicyEntry("random", _random, env_kwargs=_rate_mode(), per_seed=True),
+    # one-step predictive law and nonlinear MPC on the nominal model, both filtered; the
+    # MPC keeps its last plan as a warm start: one object per episode
+    PolicyEntry("predictive", nominal.nominal_predictive, env_kwargs=_rate_mode()),
+    PolicyEntry("mpc", nominal.nominal_mpc, env_kwargs=_rate_mode(), per_seed=True),
 )
 BASELINES = tuple(e.name for e in _BUILT_IN)
-"""The built-in baselines (``python evaluate.py`` benchmarks them by default)."""
+"""The built-in baselines (``python evaluate.py`` benchmarks them by default, except
+those in :data:`OPT_IN`)."""
+OPT_IN = ("mpc",)
+"""Built-in baselines that ``python evaluate.py`` runs only when named: ``mpc`` needs the
+optional CasADi and takes minutes on the default suite (``evaluate.py mpc``)."""
 _REGISTRY: dict[str, PolicyEntry] = {e.name: e for e in _BUILT_IN}
 _PLUGINS_LOADED: list[bool] = []
 
@@ -482,11 +491,12 @@ def shipped_agents() -> dict[str, Path]:
 def default_policies() -> list[str]:
     """What ``python evaluate.py`` benchmarks by default.
 
-    The built-in baselines, the shipped agents and the handover hybrid of each shipped
-    agent in :data:`HANDOVER_OF` (not the policies registered by user code or plugins).
+    The built-in baselines but those of :data:`OPT_IN`, the shipped agents and the
+    handover hybrid of each shipped agent in :data:`HANDOVER_OF` (not the policies
+    registered by user code or plugins).
     """
     shipped = shipped_agents()
-    return (list(BASELINES) + list(shipped)
+    return ([name for name in BASELINES if name not in OPT_IN] + list(shipped)
             + [HANDOVER + name for name in HANDOVER_OF if name in shipped])
 
 
