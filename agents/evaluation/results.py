@@ -185,10 +185,10 @@ def _scenario_block(scores: dict, eps: list[dict], n_runs: int, scenario: str,
     """One policy on one scenario: IQM over runs (success: raw fraction), intervals."""
     counts = success_counts([e for e in eps if e["scenario"] == scenario],
                             list(range(n_runs)), [scenario])
-    block = {m: iqm(scores[m][:, j]) for m in METRICS}
-    block["success"] = counts.rate
-    block["ci95"] = {m: stratified_bootstrap_ci(scores[m][:, j:j + 1]) for m in METRICS}
-    block["ci95"]["success"] = success_rate_ci(counts)
+    ci95 = {m: stratified_bootstrap_ci(scores[m][:, j:j + 1]) for m in METRICS}
+    ci95["success"] = success_rate_ci(counts)
+    block: dict = {m: iqm(scores[m][:, j]) for m in METRICS}
+    block.update(success=counts.rate, ci95=ci95)
     return block
 
 

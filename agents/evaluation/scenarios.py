@@ -38,8 +38,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Scenario", "SUITES", "ROBUST_SUITE", "NOMINAL_KEYS", "get_suite", "load_suite_file", "describe_suites",
-           "RANDOM_INIT", "PAPER_SCENARIO", "WRITTEN_FOR", "per_tether", "default_masses"]
+__all__ = ["Scenario", "SUITES", "ROBUST_SUITE", "NOMINAL_KEYS", "get_suite",
+           "load_suite_file", "describe_suites", "RANDOM_INIT", "PAPER_SCENARIO",
+           "WRITTEN_FOR", "per_tether", "default_masses"]
 
 WRITTEN_FOR = 3
 """The number of bodies the built-in scenarios are written for (the env's default)."""

@@ -56,8 +56,11 @@ def test_command_txt_parses_into_a_from_scratch_run(name, run, tmp_path, monkeyp
     resolved = settings.resolved_config()
     assert (resolved["algo"], resolved["seed"], resolved["n_envs"]) == (
         recorded["algo"], recorded["seed"], recorded["n_envs"])
-    hyper = {k: v for k, v in resolved["hyperparams"].items() if k != "env_kwargs"}
-    want = {k: v for k, v in recorded["hyperparams"].items() if k != "env_kwargs"}
+    # the budget is checked against the steps trained below (a run given --timesteps
+    # records its config's n_timesteps, which it did not use)
+    skip = ("env_kwargs", "n_timesteps")
+    hyper = {k: v for k, v in resolved["hyperparams"].items() if k not in skip}
+    want = {k: v for k, v in recorded["hyperparams"].items() if k not in skip}
     assert json.loads(json.dumps(hyper)) == json.loads(json.dumps(want))
     assert _env(resolved["env_kwargs"]) == _env(recorded["env_kwargs"])
     # budgets: the first call's n_timesteps, then each resume's --timesteps, in whole
