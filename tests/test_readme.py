@@ -53,9 +53,15 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
         "reproduces every figure of the paper (minutes; tests/agents/paper check its parts)",
     "python train.py --algo ppo --seeds 10 --seed 0 --out runs/ppo": RAY,
     "python train.py --algo ppo --seed K --resume --timesteps 3000000 --out "
-    "runs/ppo_6m/seed_K": "K stands for each seed 0 ... 9 of the shipped agents",
-    "python -m tether_gym_agents.files export runs/ppo_6m agents/pretrained/ppo":
+    "runs/ppo/seed_K": "K stands for each seed 0 ... 9 of the shipped agents",
+    "python -m tether_gym_agents.files export runs/ppo agents/pretrained/ppo":
         "writes the shipped agents from their full-budget runs",
+    "python train.py --config configs/ppo_fast.yml --seed K --out runs/ppo_fast/seed_K":
+        "K stands for each seed 0 ... 4 of the shipped agents (about 10 min each; "
+        "tests/agents/training/test_shipped_commands.py resolves them)",
+    "python evaluate.py curves runs/ppo_fast --out docs/curves":
+        "needs the five ppo_fast runs with their checkpoints (tests/agents/evaluation/"
+        "test_curves.py runs the command on tiny runs)",
     "python train.py --config configs/ppo_symlog.yml --seeds 10 --seed 0 --out "
     "runs/ppo_symlog": RAY,
     "python -m tether_gym_agents.files export runs/ppo_symlog/seed_K "
