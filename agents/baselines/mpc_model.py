@@ -210,6 +210,12 @@ def _rhs(ca, nu, y, command, disturbance, par, n: int, full: bool):
     return ca.vertcat(*dtheta, *ddth_d, *dlength, *ddl), ca.vertcat(*tension)
 
 
+def _symbols(ca, n: int):
+    """CasADi symbols (nu, y (4n), command (n), disturbance (n), par (PARAMS row))."""
+    return (ca.SX.sym("nu"), ca.SX.sym("y", 4 * n), ca.SX.sym("command", n),
+            ca.SX.sym("disturbance", n), ca.SX.sym("par", PARAMS.size(n)))
+
+
 def rhs_function(n: int, full: bool = False):
     """CasADi Function ``rhs(nu, y, command, disturbance, par) -> (dy, tension)``.
 
@@ -224,11 +230,7 @@ def rhs_function(n: int, full: bool = False):
     key = ("rhs", n, full)
     if key not in _CACHE:
         ca = casadi()
-        nu = ca.SX.sym("nu")
-        y = ca.SX.sym("y", 4 * n)
-        cmd = ca.SX.sym("command", n)
-        dist = ca.SX.sym("disturbance", n)
-        par = ca.SX.sym("par", PARAMS.size(n))
+        nu, y, cmd, dist, par = _symbols(ca, n)
         dy, tension = _rhs(ca, nu, y, cmd, dist, par, n, full)
         _CACHE[key] = ca.Function("rhs", [nu, y, cmd, dist, par], [dy, tension],
                                   ["nu", "y", "command", "disturbance", "par"],
@@ -274,11 +276,7 @@ def step_function(n: int, substeps: int, full: bool = False):
     key = ("step", n, substeps, full)
     if key not in _CACHE:
         ca = casadi()
-        nu = ca.SX.sym("nu")
-        y = ca.SX.sym("y", 4 * n)
-        cmd = ca.SX.sym("command", n)
-        dist = ca.SX.sym("disturbance", n)
-        par = ca.SX.sym("par", PARAMS.size(n))
+        nu, y, cmd, dist, par = _symbols(ca, n)
         h = ca.SX.sym("h")
         out = rk4_step(ca, nu, y, cmd, dist, par, h, substeps, n, full)
         _CACHE[key] = ca.Function("step", [nu, y, cmd, dist, par, h], list(out),
