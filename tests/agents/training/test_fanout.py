@@ -112,7 +112,10 @@ def _interrupt_after(run_dir, steps):
         (run_dir / name).unlink(missing_ok=True)
     for path in (run_dir / "checkpoints").iterdir():
         if int(path.stem.split("_")[-2]) > steps:
-            path.unlink()
+            if path.is_dir():  # a checkpoint's safe agent folder
+                shutil.rmtree(path)
+            else:
+                path.unlink()
     curve = run_dir / "eval" / "evaluations.npz"
     with np.load(curve) as data:
         keep = data["timesteps"] <= steps

@@ -99,7 +99,8 @@ def test_a_kill_during_a_save_leaves_no_cut_file(tmp_path, monkeypatch, capsys):
         with pytest.raises(_Killed):
             main([*argv, "--timesteps", "1024"])
     names = sorted(p.name for p in (out / "checkpoints").iterdir())
-    assert names == ["model_256_steps.zip", "model_vecnormalize_256_steps.npz",
+    # the checkpoint at 256 is whole, with its safe agent folder (written after the model)
+    assert names == ["agent_256_steps", "model_256_steps.zip", "model_vecnormalize_256_steps.npz",
                      "model_vecnormalize_256_steps.pkl", "model_vecnormalize_512_steps.npz",
                      "model_vecnormalize_512_steps.pkl"]
     assert not list(out.rglob(".tmp-*"))
