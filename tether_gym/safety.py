@@ -219,17 +219,8 @@ class SafetyFilter:
             Nominal reel lag tau [rad] (> 0) and acceleration limit [m/s^2] (> 0) of the
             predicting model (the env's arguments of those names); None takes the env's.
         """
-        from dataclasses import replace
-
         cfg = env_config(env)
-        reels = cfg.reels
-        if reel_time_constant is not None:
-            reels = replace(reels, time_constant=reel_time_constant)
-        if accel_limit is not None:
-            reels = replace(reels, accel_limit=accel_limit)
-        par = cfg.scales.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
-                                    cfg.masses if masses is None else masses,
-                                    cfg.chain.gravity, reels)
+        par = cfg.nominal_params(eccentricity, masses, reel_time_constant, accel_limit)
         if margin is None:
             margin = float(cfg.reward_weights.safe_tension)
         if length_margin is None:

@@ -12,7 +12,7 @@ observed theta_d and theta_d' alone (no A, no unwrapped nu needed).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -67,14 +67,7 @@ class NominalStep:
         ``nominal`` dict, :data:`tether_gym_agents.evaluation.scenarios.NOMINAL_KEYS`).
         """
         cfg = env_config(env)
-        reels = cfg.reels
-        if reel_time_constant is not None:
-            reels = replace(reels, time_constant=float(reel_time_constant))
-        if accel_limit is not None:
-            reels = replace(reels, accel_limit=float(accel_limit))
-        par = cfg.scales.param_rows(cfg.eccentricity if eccentricity is None else eccentricity,
-                                    cfg.masses if masses is None else masses,
-                                    cfg.chain.gravity, reels)
+        par = cfg.nominal_params(eccentricity, masses, reel_time_constant, accel_limit)
         return cls(np.asarray(par, dtype=float).reshape(-1), cfg.n_tethers,
                    float(cfg.physics_step), int(cfg.n_substeps), float(cfg.max_reel_rate),
                    tuple(cfg.length_bounds), float(cfg.reward_weights.safe_tension),

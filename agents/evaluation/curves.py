@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files.run_folder import checkpoint_agents, seed_runs
+from ..files.safe_format import AGENT_FILE
 from .benchmark import EvalOptions, evaluate
 from .stats import iqm, run_scores, success_counts
 
@@ -65,7 +66,7 @@ def curve_points(folder: Path) -> list[tuple[int, list[tuple[Path, float]]]]:
     for run in runs:
         points = {}
         for steps, agent in checkpoint_agents(run):
-            training = json.loads((agent / "agent.json").read_text()).get("training", {})
+            training = json.loads((agent / AGENT_FILE).read_text()).get("training", {})
             points[steps] = (agent, float(training.get("wall_time_s", math.nan)))
         per_run.append(points)
     common = sorted(set.intersection(*(set(p) for p in per_run))) if per_run else []

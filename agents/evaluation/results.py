@@ -12,13 +12,12 @@
                         probability_of_improvement: {metric: p or null},
                         failures: {slack, tumble, length}}}
     per_scenario {scenario: {policy: {<metric>: IQM over runs, ci95: {<metric>: [lo, hi]}}}}
-
-Success is the raw surviving fraction of all episodes everywhere (``success`` and
-``success_rate`` of a policy, ``success`` of a scenario), never an IQM: a failed
-episode is never trimmed away (:mod:`.stats`).
     episodes    [{policy, run, scenario, seed, <every metric>}, ...]
 
-so that anyone can recompute the statistics from ``episodes``.
+so that anyone can recompute the statistics from ``episodes``. Success is the raw
+surviving fraction of all episodes everywhere (``success`` and ``success_rate`` of a
+policy, ``success`` of a scenario), never an IQM: a failed episode is never trimmed
+away (:mod:`.stats`).
 """
 
 from __future__ import annotations

@@ -136,15 +136,15 @@ def _stop_workers(workers: list[SpinWorker]) -> None:
         workers.pop().stop()
 
 
-
-def _bias_rows(config, num: int, m: int) -> np.ndarray:
-    """(num, m) observation offsets of the state entries: ``obs_bias`` on each theta_i.
+def _obs_bias(config: EnvConfig) -> np.ndarray:
+    """(m,) constant offsets of the observed state entries: ``obs_bias`` on each theta_i.
 
     The observation noise of a step is drawn on top of it (:meth:`ChainBatch._scale_noise`).
     """
-    noise = np.zeros((num, m))
-    noise[:, :config.n_tethers] = config.randomisation.obs_bias
-    return noise
+    bias = np.zeros(STATE.size(config.n_tethers))
+    bias[STATE.slices(config.n_tethers)["theta"]] = config.obs_bias
+    return bias
+
 
 class StartPlan(NamedTuple):
     """What every reset of one configuration reads, read from the config once.
@@ -288,11 +288,12 @@ class ChainBatch:
         n = config.n_tethers
         self.n = n
         m = STATE.size(n)
+        self._bias = _obs_bias(config)
         self._par_nominal = config.param_rows(config.eccentricity, config.masses)
         self.rows = Rows(
             nu=np.zeros(num), y=np.zeros((num, m)),
             par=np.tile(self._par_nominal, (num, 1)),
-            disturbance=np.zeros((num, n)), noise=_bias_rows(config, num, m),
+            disturbance=np.zeros((num, n)), noise=np.tile(self._bias, (num, 1)),
             obs=np.zeros((num, config.obs_dim), dtype=np.float32),
             reward=np.zeros(num), components=np.zeros((num, len(COMPONENTS))),
             failure=np.zeros(num, dtype=np.int64),
@@ -692,8 +693,8 @@ class ChainBatch:
         ``_gauss``.
         """
         self.rows.noise[sel] = self.config.obs_noise * self._gauss[sel]
-        if self.config.randomisation.obs_bias:
-            self.rows.noise[sel, :self.n] += self.config.randomisation.obs_bias
+        if self.config.obs_bias:
+            self.rows.noise[sel] += self._bias
 
     def truncated(self) -> np.ndarray:
         """Rows whose episode has reached its length in true anomaly."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import difflib
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -422,6 +422,24 @@ class EnvConfig:
     def param_rows(self, eccentricity, masses) -> np.ndarray:
         """Kernel parameter rows for e of shape (...,) and masses of shape (..., n)."""
         return self.scales.param_rows(eccentricity, masses, self.chain.gravity, self.reels)
+
+    def nominal_params(self, eccentricity=None, masses=None, reel_time_constant=None,
+                       accel_limit=None) -> np.ndarray:
+        """The parameter row (P,) of a model that differs from this configuration's.
+
+        Each argument left None is the configuration's own: eccentricity e [-], masses
+        (any common unit), ``reel_time_constant`` tau [rad] and ``accel_limit``
+        [m/s^2] (the env arguments of those names). Model-based controllers and the
+        safety filter predict with it under model mismatch.
+        """
+        reels = self.reels
+        if reel_time_constant is not None:
+            reels = replace(reels, time_constant=reel_time_constant)
+        if accel_limit is not None:
+            reels = replace(reels, accel_limit=accel_limit)
+        return self.scales.param_rows(self.eccentricity if eccentricity is None else eccentricity,
+                                      self.masses if masses is None else masses,
+                                      self.chain.gravity, reels)
 
     @property
     def accel_reference(self) -> float:
