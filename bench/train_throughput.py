@@ -14,7 +14,7 @@ It prints one markdown table. Each share is a part of the wall time of ``model.l
 * **other rollout**: the rest of the rollout loop's per-step Python: the SB3 adapter's
   info dicts (also shown alone, "adapter"), VecNormalize, VecMonitor, the rollout or
   replay buffer, GAE, the callbacks' per-step calls, tensor conversions;
-* **update**: ``PPO.train`` / ``SAC.train`` (minibatch or gradient steps), with the cost
+* **update**: ``PPO.train`` / ``CapsSAC.train`` (minibatch or gradient steps), with the cost
   of one minibatch (PPO) or one gradient step (SAC);
 * **eval + ckpt**: the evaluation callback (its episodes, the best-agent saves) and the
   checkpoints, which a recipe's ``eval_freq`` and ``checkpoint_freq`` set;
@@ -146,13 +146,14 @@ class Profile:
 @contextlib.contextmanager
 def profiled():
     """A :class:`Profile` of the methods this bench reports, patched while in use."""
-    from stable_baselines3 import PPO, SAC
+    from stable_baselines3 import PPO
     from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
     from stable_baselines3.common.on_policy_algorithm import OnPolicyAlgorithm
     from stable_baselines3.common.policies import ActorCriticPolicy, BasePolicy
 
     from tether_gym.envs.vector import TetherLibrationVectorEnv
     from tether_gym_agents.training.callbacks import RunCheckpointCallback, RunEvalCallback
+    from tether_gym_agents.training.caps import CapsSAC
     from tether_gym_agents.training.vec_env import TetherSB3VecEnv
 
     profile = Profile()
@@ -160,7 +161,8 @@ def profiled():
         profile.wrap(owner, "learn", "learn")
         profile.wrap(owner, "collect_rollouts", "rollout")
     profile.wrap(PPO, "train", "update")
-    profile.wrap(SAC, "train", "update",
+    # train.py's SAC is CapsSAC (SAC's own train runs inside it when no smoothing is set)
+    profile.wrap(CapsSAC, "train", "update",
                  count=lambda a, k: k.get("gradient_steps", a[1] if len(a) > 1 else 1))
     profile.wrap(TetherLibrationVectorEnv, "step", "env", in_rollout=True)
     profile.wrap(TetherLibrationVectorEnv, "reset", "env", in_rollout=True)

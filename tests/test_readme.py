@@ -62,6 +62,12 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
     "python evaluate.py curves runs/ppo_fast --out docs/curves":
         "needs the five ppo_fast runs with their checkpoints (tests/agents/evaluation/"
         "test_curves.py runs the command on tiny runs)",
+    "python train.py --algo sac --config configs/sac.yml --seeds 5 --out runs/sac": RAY,
+    "python -m tether_gym_agents.files export runs/sac agents/pretrained/sac":
+        "writes the shipped agents from their full-budget runs",
+    "python evaluate.py curves runs/sac --out docs/curves_sac":
+        "needs the five sac runs with their checkpoints (tests/agents/evaluation/"
+        "test_curves.py runs the command on tiny runs)",
     "python train.py --config configs/ppo_symlog.yml --seeds 10 --seed 0 --out "
     "runs/ppo_symlog": RAY,
     "python -m tether_gym_agents.files export runs/ppo_symlog/seed_K "

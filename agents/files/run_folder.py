@@ -24,7 +24,8 @@ export and the evaluation use its names and functions. A run folder
 ``vecnormalize.npz``,          the normalisation statistics and the replay buffer
 ``final_replay_buffer.npz``    (SAC) as arrays, which ``--resume`` reads; likewise
                                ``checkpoints/model_vecnormalize_<N>_steps.npz``,
-                               ``model_replay_buffer_<N>_steps.npz``
+                               ``model_replay_buffer_<N>_steps.npz`` (the newest
+                               checkpoint's only: 360 MB each for SAC's 1M buffer)
 ``best_model.zip``,            stable-baselines3's pickled files, read only on
 ``vecnormalize.pkl``,          opt-in (``--allow-pickle``; and
 ``final_replay_buffer.pkl``,   :mod:`tether_gym_agents.files.pickled`)
@@ -79,7 +80,8 @@ __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_
            "yaml_text", "write_train_info",
            "read_train_info", "trained_steps", "write_config", "read_config", "write_args",
            "append_command", "evaluations_path", "read_evaluations", "write_evaluations",
-           "saved_models", "checkpoint_steps", "checkpoint_agents", "seed_dir", "seed_runs"]
+           "saved_models", "checkpoint_steps", "checkpoint_agents", "seed_dir", "seed_runs",
+           "prune_checkpoint_buffers"]
 
 CONFIG_FILE = "config.yml"
 ARGS_FILE = "args.yml"
@@ -359,6 +361,26 @@ def saved_models(run: Path) -> list[SavedModel]:
                                 ckpt.parent / f"{prefix}_replay_buffer_{tag}_steps.pkl",
                                 int(tag)))
     return found
+
+
+def prune_checkpoint_buffers(run: Path, keep_steps: int) -> list[Path]:
+    """Delete the replay buffers of every checkpoint but ``model_<keep_steps>_steps``.
+
+    Each checkpoint of an off-policy run otherwise keeps its own copy of the whole
+    buffer (SAC with ``buffer_size`` 1M and 16 envs: 360 MB per checkpoint, ``.pkl`` and
+    ``.npz``; a 300k-step run with a checkpoint every 50k steps kept 2.2 GB of them).
+    ``--resume`` reads only the newest whole checkpoint's buffer; a run resumed from an
+    older checkpoint (the newest one damaged) continues with an empty buffer, which
+    ``--resume`` says. Returns the deleted files.
+    """
+    folder = Path(run) / CHECKPOINT_DIR
+    deleted = []
+    for path in sorted(folder.glob(f"{CHECKPOINT_PREFIX}_replay_buffer_*_steps.*")):
+        match = _STEPS_IN_NAME.search(path.name)
+        if match and int(match.group(1)) != keep_steps and path.suffix in (".pkl", ".npz"):
+            path.unlink(missing_ok=True)
+            deleted.append(path)
+    return deleted
 
 
 def checkpoint_agents(run: Path) -> list[tuple[int, Path]]:

@@ -35,6 +35,7 @@ from ..files.run_folder import (
     EVAL_DIR,
     atomic_target,
     evaluation_arrays,
+    prune_checkpoint_buffers,
     write_evaluations,
     write_train_info,
 )
@@ -178,7 +179,9 @@ class RunCheckpointCallback(CheckpointCallback):
     """CheckpointCallback whose files are written atomically, the model last.
 
     A checkpoint's model file exists only once its statistics and buffer do, so a
-    kill during a save leaves the previous checkpoint as the newest complete one.
+    kill during a save leaves the previous checkpoint as the newest complete one. Once
+    a checkpoint is whole, the older checkpoints' replay buffers are deleted
+    (:func:`~tether_gym_agents.files.run_folder.prune_checkpoint_buffers`).
     With ``settings`` and ``clock``, each checkpoint's policy is also written as a safe
     agent, ``checkpoints/agent_<N>_steps/``, recording the run's wall time then (what
     the learning curves against wall-clock time evaluate).
@@ -196,9 +199,12 @@ class RunCheckpointCallback(CheckpointCallback):
         stats = self.model.get_vec_normalize_env()
         if self.save_vecnormalize and stats is not None:
             save_stats(stats, Path(self._checkpoint_path("vecnormalize_", extension="pkl")))
-        if self.save_replay_buffer and getattr(self.model, "replay_buffer", None) is not None:
+        buffer = self.save_replay_buffer and getattr(self.model, "replay_buffer", None) is not None
+        if buffer:
             save_buffer(self.model, Path(self._checkpoint_path("replay_buffer_", extension="pkl")))
         save_model(self.model, Path(self._checkpoint_path(extension="zip")))
+        if buffer:  # this checkpoint is whole: the older ones' buffers go
+            prune_checkpoint_buffers(Path(self.save_path).parent, self.num_timesteps)
         if self.settings is not None and self.clock is not None:
             folder = f"{CHECKPOINT_DIR}/{CHECKPOINT_AGENT_PREFIX}_{self.num_timesteps}_steps"
             save_safe_agent(self.settings, self.model,

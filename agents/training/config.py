@@ -123,10 +123,17 @@ def check_algo_params(params: dict, algo: str, source: str) -> None:
 
 
 def algo_class(algo: str):
-    """stable-baselines3's class of ``algo`` (``"ppo"`` or ``"sac"``)."""
-    from stable_baselines3 import PPO, SAC
+    """The class that trains ``algo`` (``"ppo"`` or ``"sac"``).
 
-    return {"ppo": PPO, "sac": SAC}[algo]
+    stable-baselines3's PPO for ``"ppo"``; for ``"sac"``
+    :class:`~tether_gym_agents.training.caps.CapsSAC`, which is SAC step for step unless
+    a config sets its ``caps_*`` smoothness weights.
+    """
+    from stable_baselines3 import PPO
+
+    from .caps import CapsSAC
+
+    return {"ppo": PPO, "sac": CapsSAC}[algo]
 
 
 def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:

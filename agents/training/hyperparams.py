@@ -157,7 +157,10 @@ _CHECKS: dict[str, dict[str, Any]] = {
             "replay_buffer_kwargs": _kwargs_dict, "optimize_memory_usage": _bool,
             "n_steps": _int_at_least(1), "ent_coef": _sac_ent_coef,
             "target_update_interval": _int_at_least(1), "target_entropy": _target_entropy,
-            "use_sde_at_warmup": _bool},
+            "use_sde_at_warmup": _bool,
+            # CapsSAC's smoothness weights and perturbation scale (training/caps.py)
+            "caps_temporal": _number(0.0), "caps_spatial": _number(0.0),
+            "caps_magnitude": _number(0.0), "caps_sigma": _number(0.0)},
 }
 _NETS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf")}
 _POLICY_KWARGS: dict[str, dict[str, Any]] = {

@@ -296,3 +296,41 @@ def test_resume_after_evaluation_past_the_checkpoint(tmp_path, monkeypatch, tiny
     assert _info(run)["num_timesteps"] == TARGET
     steps = np.load(curve)["timesteps"]
     np.testing.assert_array_equal(steps, np.arange(128, TARGET + 1, 128))
+
+
+@pytest.mark.parametrize("algo, hyperparams", [
+    # the shipped sac.yml's learner in miniature: CAPS weights, several envs per update
+    ("sac", {"policy": "MlpPolicy", "learning_starts": 64, "batch_size": 32,
+             "buffer_size": 2000, "gradient_steps": 2, "ent_coef": "auto_0.005",
+             "caps_temporal": 1.0, "caps_spatial": 1.0, "caps_magnitude": 1.0,
+             "policy_kwargs": {"net_arch": [16, 16]}}),
+    # ppo_fast.yml's geometry in miniature: many envs, short rollouts, a linear schedule
+    ("ppo", {"policy": "MlpPolicy", "n_envs": 8, "n_steps": 16, "batch_size": 64,
+             "n_epochs": 2, "learning_rate": "lin_1.0e-3",
+             "policy_kwargs": {"net_arch": [16, 16], "log_std_init": -3.5}}),
+])
+def test_sac_and_fast_ppo_train_through_the_fanout(tmp_path, monkeypatch, algo, hyperparams):
+    """Two seeds of each shipped learner's recipe, trained for real in this process."""
+    real = fanout.run_jobs
+    monkeypatch.setattr(fanout, "require_ray", lambda: None)
+    monkeypatch.setattr(fanout, "run_jobs", lambda jobs, **kw: real(jobs, **{**kw,
+                                                                           "use_ray": False}))
+    config = tmp_path / f"{algo}.yml"
+    config.write_text(yaml.safe_dump({"default": hyperparams}))
+    out = tmp_path / "fan"
+    argv = ["--algo", algo, "--config", str(config), "--seeds", "2", "--out", str(out),
+            "--timesteps", "256", "--eval-freq", "128", "--checkpoint-freq", "128",
+            "--eval-episodes", "1", "--env-kwargs", "orbits_per_episode=0.05"]
+    assert main(argv) == 0
+    for seed in (0, 1):
+        run = out / f"seed_{seed}"
+        info = _info(run)
+        assert info["seed"] == seed and info["num_timesteps"] >= 256
+        assert info["wall_time_s"] > 0
+        assert (run / "agent.json").is_file() and (run / "final_agent" / "agent.json").is_file()
+        resolved = yaml.safe_load((run / "config.yml").read_text())
+        assert resolved["algo"] == algo
+        assert all(resolved["hyperparams"][k] == v for k, v in hyperparams.items()
+                   if k not in ("policy_kwargs", "learning_rate"))
+    assert not _same_weights(out / "seed_0" / "final_model.zip",
+                             out / "seed_1" / "final_model.zip")

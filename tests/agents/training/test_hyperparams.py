@@ -51,6 +51,8 @@ BAD = [  # (algo, config values, the key the message names)
     ("sac", {"ent_coef": "auto_x"}, "ent_coef"),
     ("sac", {"ent_coef": -0.1}, "ent_coef"),
     ("sac", {"target_entropy": "low"}, "target_entropy"),
+    ("sac", {"caps_magnitude": -1.0}, "caps_magnitude"),
+    ("sac", {"caps_sigma": float("nan")}, "caps_sigma"),
     ("sac", {"action_noise": "normal"}, "action_noise"),
     ("sac", {"policy_kwargs": {"net_arch": {"pi": [64], "vf": [64]}}}, "policy_kwargs.net_arch"),
     ("sac", {"policy_kwargs": {"ortho_init": True}}, "policy_kwargs"),

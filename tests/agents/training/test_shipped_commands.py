@@ -36,7 +36,8 @@ def _env(kwargs: dict) -> EnvConfig:
 
 
 def test_every_shipped_agent_has_seeds():
-    assert {name for name, _ in SEEDS} >= {"ppo", "ppo_symlog", "ppo_g025", "smc_residual"}
+    assert {name for name, _ in SEEDS} >= {"ppo", "ppo_symlog", "ppo_g025", "smc_residual",
+                                           "ppo_fast", "sac"}
 
 
 @pytest.mark.parametrize(("name", "run"), SEEDS, ids=[f"{n}-{r.name}" for n, r in SEEDS])
@@ -61,13 +62,20 @@ def test_command_txt_parses_into_a_from_scratch_run(name, run, tmp_path, monkeyp
     skip = ("env_kwargs", "n_timesteps")
     hyper = {k: v for k, v in resolved["hyperparams"].items() if k not in skip}
     want = {k: v for k, v in recorded["hyperparams"].items() if k not in skip}
+    # SB3's SAC adds policy_kwargs.use_sde to the mapping it is given, and config.yml
+    # records the run's mapping after that (training/run.py)
+    if resolved["algo"] == "sac" and "use_sde" not in hyper.get("policy_kwargs", {}):
+        want["policy_kwargs"] = {k: v for k, v in want["policy_kwargs"].items()
+                                 if k != "use_sde"}
     assert json.loads(json.dumps(hyper)) == json.loads(json.dumps(want))
     assert _env(resolved["env_kwargs"]) == _env(recorded["env_kwargs"])
     # budgets: the first call's n_timesteps, then each resume's --timesteps, in whole
-    # rollouts of n_steps x n_envs
+    # rollouts of n_steps (PPO) or train_freq (SAC) x n_envs
     budget = settings.timesteps + sum(a.timesteps for a in later)
     info = json.loads((run / "train_info.json").read_text())
     steps = info["num_timesteps"]
     assert info["wall_time_s"] > 0  # every call's time, killed parts included
-    rollout = recorded["hyperparams"]["n_steps"] * recorded["n_envs"]
+    hp = recorded["hyperparams"]  # PPO collects n_steps per env, SAC train_freq (steps)
+    rollout = hp["n_steps"] if recorded["algo"] == "ppo" else hp.get("train_freq", 1)
+    rollout *= recorded["n_envs"]
     assert budget <= steps < budget + rollout * (1 + len(later))

@@ -164,7 +164,13 @@ def test_sac_resume_restores_replay_buffer(tmp_path, capsys):
     out = tmp_path / "sac"
     cfg = ["--config", str(_tiny_sac_config(tmp_path))]
     assert main(["--algo", "sac", "--out", str(out), "--timesteps", "512", *cfg, *TINY]) == 0
-    assert list((out / "checkpoints").glob("model_replay_buffer_*_steps.pkl"))
+    # only the newest checkpoint keeps its replay buffer (pickle and arrays)
+    steps = [int(p.stem.split("_")[1]) for p in (out / "checkpoints").glob("model_[0-9]*.zip")]
+    buffers = sorted(p.name for p in (out / "checkpoints").glob("model_replay_buffer_*"))
+    newest = max(steps)
+    assert len(steps) >= 2
+    assert buffers == [f"model_replay_buffer_{newest}_steps.npz",
+                       f"model_replay_buffer_{newest}_steps.pkl"]
     capsys.readouterr()
     assert main(["--algo", "sac", "--out", str(out), "--timesteps", "256", "--resume",
                  *TINY]) == 0

@@ -1,8 +1,8 @@
-"""SAC with action-smoothness terms in the actor loss (CAPS, Mysore et al. 2021).
+"""SAC with optional action-smoothness terms in the actor loss (CAPS, Mysore et al. 2021).
 
-:class:`CapsSAC` is stable-baselines3's SAC with up to three penalties added to the
-actor loss, each on the policy's deterministic action mu(s) = tanh(mean(s)) in
-[-1, 1] (no sampling noise):
+:class:`CapsSAC` is the class ``train.py --algo sac`` trains: stable-baselines3's SAC
+with up to three penalties added to the actor loss, each on the policy's deterministic
+action mu(s) = tanh(mean(s)) in [-1, 1] (no sampling noise):
 
 * temporal, ``caps_temporal`` * mean ||mu(s_t) - mu(s_t+1)||^2 over the replay batch's
   transitions (CAPS's L_T);
@@ -77,7 +77,8 @@ class CapsSAC(SAC):
         super().__init__(*args, **kwargs)
 
     # SAC's keyword arguments and the penalties' (train.py checks config keys against it)
-    __init__.__signature__ = inspect.signature(SAC.__init__).replace(parameters=[
+    __init__.__signature__ = inspect.signature(  # type: ignore[attr-defined]
+        SAC.__init__).replace(parameters=[
         *inspect.signature(SAC.__init__).parameters.values(),
         *(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
           for name, default in (("caps_temporal", 0.0), ("caps_spatial", 0.0),
@@ -100,6 +101,7 @@ class CapsSAC(SAC):
             optimizers += [self.ent_coef_optimizer]
         self._update_learning_rate(optimizers)
 
+        assert self.replay_buffer is not None  # SAC's _setup_model made it
         ent_coef_losses, ent_coefs, actor_losses, critic_losses = [], [], [], []
         terms = []
         for gradient_step in range(gradient_steps):
@@ -115,7 +117,7 @@ class CapsSAC(SAC):
             if self.ent_coef_optimizer is not None and self.log_ent_coef is not None:
                 ent_coef = th.exp(self.log_ent_coef.detach())
                 ent_coef_loss = -(self.log_ent_coef
-                                  * (log_prob + self.target_entropy).detach()).mean()
+                                  * (log_prob + float(self.target_entropy)).detach()).mean()
                 ent_coef_losses.append(ent_coef_loss.item())
             else:
                 ent_coef = self.ent_coef_tensor
@@ -134,7 +136,8 @@ class CapsSAC(SAC):
                 next_q = next_q - ent_coef * next_log_prob.reshape(-1, 1)
                 target_q = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q
             current_q = self.critic(replay_data.observations, replay_data.actions)
-            critic_loss = 0.5 * sum(F.mse_loss(q, target_q) for q in current_q)
+            critic_loss: th.Tensor = 0.5 * sum(  # type: ignore[assignment]
+                F.mse_loss(q, target_q) for q in current_q)
             critic_losses.append(critic_loss.item())
             self.critic.optimizer.zero_grad()
             critic_loss.backward()
