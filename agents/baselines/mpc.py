@@ -75,7 +75,7 @@ from tether_gym.tasks.termination import TUMBLE_ANGLE
 
 from ..common.obs import ObservationLayout, ReelRatePolicy
 from . import mpc_model
-from .prediction import NominalStep, reference_ahead
+from .prediction import NominalStep, OnNominalStep, reference_ahead
 
 __all__ = ["ModelPredictiveController", "Plan"]
 
@@ -235,7 +235,7 @@ def _diagnostics_function(n: int, substeps: int, full: bool, blocks: tuple[int, 
     return _FUNCTIONS[key]
 
 
-class ModelPredictiveController(ReelRatePolicy):
+class ModelPredictiveController(OnNominalStep, ReelRatePolicy):
     """Nonlinear MPC of the reel rates on the nominal model (module docstring).
 
     Parameters
@@ -315,16 +315,6 @@ class ModelPredictiveController(ReelRatePolicy):
         self.plans: list[np.ndarray | None] = []
         self.solve_times: list[float] = []
         self.last_slack = math.nan
-
-    @classmethod
-    def for_env(cls, env, nominal: dict | None = None, **kwargs) -> ModelPredictiveController:
-        """Build for a TetherLibration env, on its model or on ``nominal``.
-
-        ``nominal`` holds the :class:`~.prediction.NominalStep` arguments that differ
-        from the env's (a scenario's ``nominal``: e, masses, reel lag, accel limit).
-        """
-        return cls(NominalStep.for_env(env, **(nominal or {})),
-                   ObservationLayout.from_env(env), **kwargs)
 
     def reset(self) -> None:
         """Forget the warm starts (a new episode)."""

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TypeVar
 
 import numpy as np
 
@@ -20,7 +21,9 @@ from tether_gym.params import Gravity
 from tether_gym.physics import PARAMS, STATE, transition
 from tether_gym.safety import env_config
 
-__all__ = ["NominalStep", "reference_ahead", "decay"]
+from ..common.obs import ObservationLayout
+
+__all__ = ["NominalStep", "OnNominalStep", "reference_ahead", "decay"]
 
 
 @dataclass(frozen=True)
@@ -104,6 +107,26 @@ class NominalStep:
         """:func:`~tether_gym.physics.transition` of states (B, 4n) under normalised u (B, n)."""
         return transition(nu, state, np.clip(command, -1.0, 1.0) * self.max_reel_rate,
                           self.params, self.physics_step, self.substeps)
+
+
+_Law = TypeVar("_Law", bound="OnNominalStep")
+
+
+class OnNominalStep:
+    """A law built as ``cls(step, layout, **kwargs)`` on a :class:`NominalStep`.
+
+    Gives it :meth:`for_env` (the predictive and the model-predictive laws).
+    """
+
+    @classmethod
+    def for_env(cls: type[_Law], env, nominal: dict | None = None, **kwargs) -> _Law:
+        """Build for a TetherLibration env, on its model or on ``nominal``.
+
+        ``nominal`` holds the :class:`NominalStep` arguments that differ from the
+        env's (a scenario's ``nominal``: e, masses, reel lag, accel limit).
+        """
+        return cls(NominalStep.for_env(env, **(nominal or {})),  # type: ignore[call-arg]
+                   ObservationLayout.from_env(env), **kwargs)
 
 
 def reference_ahead(theta_ref, dtheta_ref, frequency: float, delta):

@@ -41,12 +41,12 @@ import numpy as np
 from tether_gym.params import check_range
 
 from ..common.obs import ObservationLayout, ReelRatePolicy
-from .prediction import NominalStep, decay, reference_ahead
+from .prediction import NominalStep, OnNominalStep, decay, reference_ahead
 
 __all__ = ["OneStepPredictive"]
 
 
-class OneStepPredictive(ReelRatePolicy):
+class OneStepPredictive(OnNominalStep, ReelRatePolicy):
     """The held reel-rate command that makes the predicted s decay by exp(-lam dt).
 
     Parameters
@@ -86,16 +86,6 @@ class OneStepPredictive(ReelRatePolicy):
             raise ValueError(f"iterations={iterations!r} must be an int >= 1")
         self.iterations = iterations
         self.fd_step = check_range("fd_step", fd_step, 0.0, 0.1, low_open=True)
-
-    @classmethod
-    def for_env(cls, env, nominal: dict | None = None, **kwargs) -> OneStepPredictive:
-        """Build for a TetherLibration env, on its model or on ``nominal``.
-
-        ``nominal`` holds the :class:`~.prediction.NominalStep` arguments that differ
-        from the env's (a scenario's ``nominal``: e, masses, reel lag, accel limit).
-        """
-        return cls(NominalStep.for_env(env, **(nominal or {})),
-                   ObservationLayout.from_env(env), **kwargs)
 
     def sliding_variable(self, obs: np.ndarray) -> np.ndarray:
         """s = e' + c e [rad/rad] per tether for observations (B, obs_dim) -> (B, n)."""

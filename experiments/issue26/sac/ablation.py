@@ -58,13 +58,13 @@ def train(cells: list[str]) -> None:
                            check=True, cwd=ROOT)
 
 
-def _score(cell: str) -> dict:
-    out = RUNS / cell / "eval"
+def _score(path: Path, out: Path) -> dict:
+    """``evaluate.py``'s results for the policy at ``path`` (a run, or a cell of runs),
+    read from ``out`` when an earlier call wrote them there."""
     if not (out / "results.json").is_file():
-        subprocess.run([sys.executable, str(ROOT / "evaluate.py"), str(RUNS / cell), "--out",
-                        str(out), "--no-plots"], check=True, cwd=ROOT)
-    results = json.loads((out / "results.json").read_text())
-    (policy,) = results["policies"].values()
+        subprocess.run([sys.executable, str(ROOT / "evaluate.py"), str(path), "--out", str(out),
+                        "--no-plots"], check=True, cwd=ROOT)
+    (policy,) = json.loads((out / "results.json").read_text())["policies"].values()
     return policy
 
 
@@ -78,13 +78,10 @@ def table(cells: list[str]) -> str:
             lines.append(f"| {cell} | {CELLS[cell]} | {len(runs)} of {len(SEEDS)} finished "
                          "| | | | | | | |")
             continue
-        p = _score(cell)
+        p = _score(RUNS / cell, RUNS / cell / "eval")
         lo, hi = p["ci95"]["tracking_rms"]
         walls = [json.loads((r / "train_info.json").read_text())["wall_time_s"] for r in runs]
-        per_seed = []
-        for r in runs:
-            single = _score_single(r)
-            per_seed.append(f"{single:.2g}")
+        per_seed = [f"{_score(r, r / 'evalres')['tracking_rms']:.2g}" for r in runs]
         lines.append(
             f"| {cell} | {CELLS[cell]} | {len(runs)} | {p['survived']}/{p['n_episodes']} "
             f"| {p['worst_scenario']} ({p['worst_scenario_success']:.2f}) "
@@ -92,15 +89,6 @@ def table(cells: list[str]) -> str:
             f"| {p['reel_effort']:.2f} | {p['chattering']:.1f} "
             f"| {min(walls):.0f}-{max(walls):.0f} |")
     return "\n".join(lines)
-
-
-def _score_single(run: Path) -> float:
-    out = run / "evalres"
-    if not (out / "results.json").is_file():
-        subprocess.run([sys.executable, str(ROOT / "evaluate.py"), str(run), "--out", str(out),
-                        "--no-plots"], check=True, cwd=ROOT)
-    (policy,) = json.loads((out / "results.json").read_text())["policies"].values()
-    return policy["tracking_rms"]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -193,9 +193,10 @@ def test_without_ray(tmp_path, capsys, monkeypatch, tiny):
     assert _info(tmp_path / "fan" / "seed_3")["seed"] == 3
 
 
-def _in_process(monkeypatch, fake_train):
-    """Seeds run in this process with ``fake_train`` as the training function."""
-    monkeypatch.setattr(fanout, "train", fake_train)
+def _in_process(monkeypatch, fake_train=None):
+    """Seeds run in this process, with ``fake_train`` as the training function if given."""
+    if fake_train is not None:
+        monkeypatch.setattr(fanout, "train", fake_train)
     monkeypatch.setattr(fanout, "require_ray", lambda: None)
     real = fanout.run_jobs
     monkeypatch.setattr(fanout, "run_jobs", lambda jobs, **kw: real(jobs, **{**kw,
@@ -311,10 +312,7 @@ def test_resume_after_evaluation_past_the_checkpoint(tmp_path, monkeypatch, tiny
 ])
 def test_sac_and_fast_ppo_train_through_the_fanout(tmp_path, monkeypatch, algo, hyperparams):
     """Two seeds of each shipped learner's recipe, trained for real in this process."""
-    real = fanout.run_jobs
-    monkeypatch.setattr(fanout, "require_ray", lambda: None)
-    monkeypatch.setattr(fanout, "run_jobs", lambda jobs, **kw: real(jobs, **{**kw,
-                                                                           "use_ray": False}))
+    _in_process(monkeypatch)
     config = tmp_path / f"{algo}.yml"
     config.write_text(yaml.safe_dump({"default": hyperparams}))
     out = tmp_path / "fan"
