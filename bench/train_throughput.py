@@ -50,6 +50,8 @@ from pathlib import Path
 for _var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+from tether_gym_agents.files.safe_format import ALGOS  # noqa: E402  (after the threads)
+
 ROOT = Path(__file__).resolve().parents[1]
 CONFIGS = ROOT / "agents" / "configs"
 
@@ -67,12 +69,12 @@ class Recipe:
     def parse(cls, text: str) -> Recipe:
         """``ALGO:PATH[@STEPS]``, e.g. ``ppo:configs/ppo_fast.yml@300000``."""
         algo, sep, rest = text.partition(":")
-        if not sep or algo not in ("ppo", "sac"):
+        if not sep or algo not in ALGOS:
             raise argparse.ArgumentTypeError(
-                f"recipe {text!r}: must be ALGO:PATH[@STEPS] with ALGO ppo or sac")
+                f"recipe {text!r}: must be ALGO:PATH[@STEPS] with ALGO one of {list(ALGOS)}")
         path, _, steps = rest.partition("@")
         try:
-            budget = int(steps) if steps else (20_000 if algo == "sac" else 100_000)
+            budget = int(steps) if steps else (100_000 if algo == "ppo" else 20_000)
         except ValueError:
             raise argparse.ArgumentTypeError(f"recipe {text!r}: STEPS {steps!r} is not an "
                                              "integer") from None
@@ -153,7 +155,7 @@ def profiled():
 
     from tether_gym.envs.vector import TetherLibrationVectorEnv
     from tether_gym_agents.training.callbacks import RunCheckpointCallback, RunEvalCallback
-    from tether_gym_agents.training.caps import CapsSAC
+    from tether_gym_agents.training.caps import CapsMixin
     from tether_gym_agents.training.vec_env import TetherSB3VecEnv
 
     profile = Profile()
@@ -161,8 +163,9 @@ def profiled():
         profile.wrap(owner, "learn", "learn")
         profile.wrap(owner, "collect_rollouts", "rollout")
     profile.wrap(PPO, "train", "update")
-    # train.py's SAC is CapsSAC (SAC's own train runs inside it when no smoothing is set)
-    profile.wrap(CapsSAC, "train", "update",
+    # train.py's SAC and TQC are CapsSAC and CapsTQC, whose train is CapsMixin's (the
+    # library's own train runs inside it when no smoothing is set)
+    profile.wrap(CapsMixin, "train", "update",
                  count=lambda a, k: k.get("gradient_steps", a[1] if len(a) > 1 else 1))
     profile.wrap(TetherLibrationVectorEnv, "step", "env", in_rollout=True)
     profile.wrap(TetherLibrationVectorEnv, "reset", "env", in_rollout=True)
@@ -271,7 +274,7 @@ def main(argv=None) -> int:
     if args.quick:
         # SAC keeps a few gradient steps past sac.yml's learning_starts (5000)
         recipes = [Recipe(r.name, r.algo, r.config,
-                          max(r.timesteps // 5, 6000 if r.algo == "sac" else 1000))
+                          max(r.timesteps // 5, 1000 if r.algo == "ppo" else 6000))
                    for r in recipes]
     for line in machine_lines(cpu):
         print(f"- {line}")

@@ -41,6 +41,7 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
         EVAL_TINY + SHORT_EPISODES,
     "python train.py --config agents/configs/ppo_residual.yml --out runs/hybrid": TRAIN_TINY,
     "python train.py --algo sac --out runs/sac": TRAIN_TINY,
+    "python train.py --algo tqc --out runs/tqc": TRAIN_TINY,
     "python -m tether_gym_agents.files export runs/ppo shipped/ppo": (),
     # How the benchmark is computed
     "python evaluate.py": EVAL_TINY + ("--suite", "paper") + SHORT_EPISODES,
@@ -59,15 +60,16 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
     "python train.py --config configs/ppo_fast.yml --seed K --out runs/ppo_fast/seed_K":
         "K stands for each seed 0 ... 4 of the shipped agents (about 10 min each; "
         "tests/agents/training/test_shipped_commands.py resolves them)",
-    "python evaluate.py curves runs/ppo_fast --out docs/curves":
-        "needs the five ppo_fast runs with their checkpoints (tests/agents/evaluation/"
+    "python evaluate.py curves runs/ppo --out docs/curves/ppo":
+        "needs the five ppo runs with their checkpoints (tests/agents/evaluation/"
         "test_curves.py runs the command on tiny runs)",
+    "python evaluate.py curves docs/curves/ppo docs/curves/ppo_symlog docs/curves/ppo_g025 "
+    "docs/curves/ppo_fast docs/curves/sac docs/curves/smc_residual --out docs/curves":
+        "rewrites the shipped side-by-side curves (test_curves.py puts written curves side "
+        "by side)",
     "python train.py --algo sac --config configs/sac.yml --seeds 5 --out runs/sac": RAY,
     "python -m tether_gym_agents.files export runs/sac agents/pretrained/sac":
         "writes the shipped agents from their full-budget runs",
-    "python evaluate.py curves runs/sac --out docs/curves_sac":
-        "needs the five sac runs with their checkpoints (tests/agents/evaluation/"
-        "test_curves.py runs the command on tiny runs)",
     "python train.py --config configs/ppo_symlog.yml --seeds 10 --seed 0 --out "
     "runs/ppo_symlog": RAY,
     "python -m tether_gym_agents.files export runs/ppo_symlog/seed_K "

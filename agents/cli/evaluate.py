@@ -120,9 +120,13 @@ def build_parser() -> argparse.ArgumentParser:
                             description="Evaluate the checkpoint agents "
                                         "(checkpoints/agent_<N>_steps/) of folders of seed "
                                         "runs on a suite, as the benchmark scores a policy; "
-                                        "write curves.json, curves.md and curves.png.")
+                                        "write curves.json, curves.md and curves.png. A "
+                                        "folder with a curves.json this command wrote is "
+                                        "read, not evaluated again, so separately evaluated "
+                                        "curves can be put side by side.")
     curves.add_argument("runs", nargs="+", type=Path,
-                        help="folders of seed_K run folders written by train.py")
+                        help="folders of seed_K run folders written by train.py, or output "
+                             "folders of this command (their curves.json)")
     curves.add_argument("--suite", default="default", help="scenario suite (default: default)")
     curves.add_argument("--seeds", type=int, default=10,
                         help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
@@ -202,7 +206,15 @@ def main(argv=None) -> int:
 
 def _curves(args: argparse.Namespace) -> int:
     """Run the curves command; print each policy's table. Returns the exit code."""
-    from ..evaluation.curves import Threshold, learning_curves, markdown, write_curves
+    from ..evaluation.curves import (
+        CURVES_FILE,
+        Threshold,
+        learning_curves,
+        load_curves,
+        markdown,
+        write_curves,
+    )
+    from ..files.run_folder import seed_runs
 
     try:
         check_int("--seeds", args.seeds, 1, MAX_SEEDS)
@@ -218,6 +230,10 @@ def _curves(args: argparse.Namespace) -> int:
         threshold = Threshold(args.rms, args.success)
         all_curves = []
         for run in args.runs:
+            if (run / CURVES_FILE).is_file() and not seed_runs(run):
+                print(f"{run}: reading its {CURVES_FILE}")
+                all_curves += load_curves(run, args.suite, args.seeds, threshold)
+                continue
             print(f"{run}: evaluating its checkpoints on suite {args.suite!r} ...")
             all_curves.append(learning_curves(run, args.suite, args.seeds, threshold))
             print(markdown(all_curves[-1]))

@@ -40,7 +40,7 @@ import tether_gym
 from ..training.config import ConfigError
 from ..training.fanout import run_fanout
 from ..training.run import train
-from ..training.settings import SEED_MAX, TrainOptions, resolve_settings
+from ..training.settings import ALGOS, SEED_MAX, TrainOptions, resolve_settings
 from ..training.sweep import run_sweep
 
 __all__ = ["main", "build_parser"]
@@ -66,7 +66,8 @@ def main(argv=None) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``train.py`` (its options are the fields of TrainOptions)."""
     p = argparse.ArgumentParser(prog="train.py", description="Train PPO or SAC on tether_gym.")
-    p.add_argument("--algo", choices=("ppo", "sac"), default="ppo")
+    p.add_argument("--algo", choices=ALGOS, default="ppo",
+                   help="ppo, sac, or tqc (sb3-contrib's TQC: pip install sb3-contrib)")
     p.add_argument("--env-id", default=tether_gym.ENV_ID)
     p.add_argument("--env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
                    help="env arguments as Python literals, e.g. eccentricity=0.3 "

@@ -17,7 +17,10 @@ first checkpoint where that seed alone meets both (its own success fraction and 
 over the scenarios).
 
 ``python evaluate.py curves RUNS... --out DIR`` writes ``curves.json``, ``curves.md``
-(one compact table per policy) and ``curves.png``.
+(one compact table per policy, after a summary table when there are several) and
+``curves.png``. A folder that holds a ``curves.json`` this command wrote (and no seed runs)
+is read instead of evaluated (:func:`load_curves`), so curves evaluated separately, for
+example one policy per core, are put side by side without evaluating them again.
 """
 
 from __future__ import annotations
@@ -36,7 +39,10 @@ from ..files.safe_format import AGENT_FILE
 from .benchmark import EvalOptions, evaluate
 from .stats import iqm, run_scores, success_counts
 
-__all__ = ["Threshold", "learning_curves", "curve_points", "write_curves", "DEFAULT_THRESHOLD"]
+__all__ = ["Threshold", "learning_curves", "curve_points", "load_curves", "write_curves",
+           "DEFAULT_THRESHOLD"]
+
+CURVES_FILE = "curves.json"
 
 
 @dataclass(frozen=True)
@@ -109,6 +115,30 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
             "per_seed": [_seed_reached(out, i, threshold) for i in range(n_runs)]}
 
 
+def load_curves(folder: Path, suite: str, n_seeds: int,
+                threshold: Threshold = DEFAULT_THRESHOLD) -> list[dict]:
+    """The curves in ``folder/curves.json``, their time to threshold recomputed.
+
+    Raises ``ValueError`` if a curve was scored on another suite or number of seeds per
+    scenario than asked (curves side by side must be the same statistic), or if the file
+    is not a list of curves.
+    """
+    path = Path(folder) / CURVES_FILE
+    curves = json.loads(path.read_text())
+    if not (isinstance(curves, list) and all(isinstance(c, dict) and "points" in c
+                                            for c in curves)):
+        raise ValueError(f"{path} is not a curves.json written by evaluate.py curves")
+    for c in curves:
+        if (c.get("suite"), c.get("seeds")) != (suite, n_seeds):
+            raise ValueError(f"{path}: {c.get('policy')} was scored on suite "
+                             f"{c.get('suite')!r} with {c.get('seeds')} seeds per scenario, "
+                             f"not on {suite!r} with {n_seeds} (give --suite and --seeds)")
+        c["threshold"] = {"rms": threshold.rms, "success": threshold.success}
+        c["reached"] = _reached(c["points"], threshold)
+        c["per_seed"] = [_seed_reached(c["points"], i, threshold) for i in range(c["runs"])]
+    return curves
+
+
 def _point(res: dict, steps: int, walls: list[float]) -> dict:
     (block,) = res["policies"].values()
     eps = res["episodes"]
@@ -145,6 +175,41 @@ def _fmt(x, spec: str) -> str:
     return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
 
 
+def _minutes(walls: list[float]) -> str:
+    walls = [w for w in walls if math.isfinite(w)]
+    if not walls:
+        return "n/a"
+    return f"{np.median(walls) / 60:.1f} ({min(walls) / 60:.1f}-{max(walls) / 60:.1f})"
+
+
+def summary_markdown(all_curves: list[dict]) -> str:
+    """One row per policy: its last checkpoint, and when (if) it reached the threshold."""
+    th = all_curves[0]["threshold"]
+    lines = [f"Time to tracking RMS <= {th['rms']:g} rad at success >= {th['success']:g} "
+             f"(suite {all_curves[0]['suite']!r}, {all_curves[0]['seeds']} seeds per "
+             "scenario and run)", "",
+             "| policy | runs | env steps | wall time per run [min], median (range) | "
+             "success | tracking RMS [rad] [95 % CI] | reached (all runs as one policy) | "
+             "runs reaching it alone |", "|---|---|---|---|---|---|---|---|"]
+    for c in all_curves:
+        last = c["points"][-1]
+        ci = last["tracking_rms_ci95"]
+        ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
+        reached = c["reached"]
+        when = ("not reached" if reached is None else
+                f"{_fmt((reached['wall_time_s_median'] or math.nan) / 60, '.1f')} min, "
+                f"{reached['steps']} steps")
+        seeds = [s for s in c["per_seed"] if s is not None]
+        alone = f"{len(seeds)} of {c['runs']}" + (
+            f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min"
+            if seeds else "")
+        lines.append(f"| {Path(c['policy']).name} | {c['runs']} | {last['steps']} | "
+                     f"{_minutes(last['wall_time_s'])} | {last['success']:.3f} "
+                     f"({last['survived']}/{last['episodes']}) | "
+                     f"{_fmt(last['tracking_rms'], '.2e')}{ci_text} | {when} | {alone} |")
+    return "\n".join(lines)
+
+
 def markdown(curves: dict) -> str:
     """A compact table of one policy's curve and its time to threshold."""
     th = curves["threshold"]
@@ -153,9 +218,7 @@ def markdown(curves: dict) -> str:
              "| env steps | wall time [min], median (range) | success | tracking RMS [rad] "
              "[95 % CI] |", "|---|---|---|---|"]
     for p in curves["points"]:
-        walls = [w for w in p["wall_time_s"] if math.isfinite(w)]
-        wall = (f"{np.median(walls) / 60:.1f} ({min(walls) / 60:.1f}-{max(walls) / 60:.1f})"
-                if walls else "n/a")
+        wall = _minutes(p["wall_time_s"])
         ci = p["tracking_rms_ci95"]
         ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
         lines.append(f"| {p['steps']} | {wall} | {p['success']:.3f} ({p['survived']}/"
@@ -182,9 +245,12 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
     from ..common.jsonio import to_jsonable
 
-    paths = [out / "curves.json", out / "curves.md"]
+    paths = [out / CURVES_FILE, out / "curves.md"]
     paths[0].write_text(json.dumps(to_jsonable(all_curves), indent=1, allow_nan=False) + "\n")
-    paths[1].write_text("\n\n".join(markdown(c) for c in all_curves) + "\n")
+    tables = [markdown(c) for c in all_curves]
+    if len(all_curves) > 1:
+        tables.insert(0, summary_markdown(all_curves))
+    paths[1].write_text("\n\n".join(tables) + "\n")
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure

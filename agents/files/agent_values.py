@@ -13,7 +13,7 @@ allowed. The bounds (see :mod:`.safe_format`):
 * ``observation_space`` / ``action_space``: a shape of 1 to :data:`MAX_SPACE_DIMS` axes
   whose sizes multiply to 1 .. :data:`MAX_SPACE_SIZE`.
 * ``policy_kwargs.net_arch``: a list of layer widths, or a mapping of such lists (``pi``,
-  ``vf`` for PPO; ``pi``, ``qf`` for SAC); each width an integer in 1 ..
+  ``vf`` for PPO; ``pi``, ``qf`` for SAC and TQC); each width an integer in 1 ..
   :data:`MAX_WIDTH`, each list at most :data:`MAX_DEPTH` layers; and the networks the
   policy builds together hold at most :data:`MAX_PARAMETERS` parameters.
 """
@@ -36,9 +36,10 @@ MAX_SPACE_SIZE = 100_000
 """Most entries of an observation or action."""
 MAX_SPACE_DIMS = 4
 """Most axes of an observation or action space."""
-NET_KEYS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf")}
+NET_KEYS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf"), "tqc": ("pi", "qf")}
 """The networks a mapping ``net_arch`` may name, per algorithm."""
 _SAC_CRITICS = 2  # SB3's default n_critics; SAC also builds a target copy of the critics
+_TQC_QUANTILES = 25  # sb3-contrib's default n_quantiles: the outputs of each TQC critic
 
 
 class ValueProblem(ValueError):
@@ -138,6 +139,15 @@ def _mlp_parameters(n_in: int, widths: list[int], n_out: int) -> int:
     return sum((a + 1) * b for a, b in zip(sizes[:-1], sizes[1:], strict=True))
 
 
+def _count(kwargs: dict, key: str, default: int) -> int:
+    """A whole number >= 1 of ``policy_kwargs`` (its default when absent)."""
+    value = kwargs.get(key, default)
+    if isinstance(value, bool) or not isinstance(value, int) or not 1 <= value <= MAX_WIDTH:
+        raise ValueProblem(f"policy_kwargs.{key}={value!r}; allowed: a whole number in "
+                           f"[1, {MAX_WIDTH}]")
+    return value
+
+
 def check_net_arch(algo: str, kwargs, n_obs: int, n_act: int) -> None:
     """``net_arch`` within the width, depth and parameter bounds, before anything is built."""
     if not isinstance(kwargs, dict):
@@ -155,8 +165,10 @@ def check_net_arch(algo: str, kwargs, n_obs: int, n_act: int) -> None:
         other = _layers(arch.get(NET_KEYS[algo][1], []), f"{key}.{NET_KEYS[algo][1]}")
     else:
         pi = other = _layers(arch, key)
-    if algo == "sac":
-        critics = 2 * _SAC_CRITICS * _mlp_parameters(n_obs + n_act, other, 1)
+    if algo in ("sac", "tqc"):
+        outputs = 1 if algo == "sac" else _count(kwargs, "n_quantiles", _TQC_QUANTILES)
+        n_critics = _SAC_CRITICS if algo == "sac" else _count(kwargs, "n_critics", _SAC_CRITICS)
+        critics = 2 * n_critics * _mlp_parameters(n_obs + n_act, other, outputs)
         total = _mlp_parameters(n_obs, pi, 2 * n_act) + critics
     else:
         total = _mlp_parameters(n_obs, pi, n_act) + _mlp_parameters(n_obs, other, 1)

@@ -145,7 +145,15 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
     warnings.warn(PICKLE_WARNING.format(files=[str(model_path)]), stacklevel=2)
     from stable_baselines3 import PPO, SAC
 
-    cls: Any = {"ppo": PPO, "sac": SAC}[algo]
+    if algo == "tqc":
+        try:
+            from sb3_contrib import TQC
+        except ImportError:
+            raise AgentLoadError(f"{model_path} is a TQC model: pip install sb3-contrib") \
+                from None
+        cls: Any = TQC
+    else:
+        cls = {"ppo": PPO, "sac": SAC}[algo]
     try:
         model = cls.load(model_path, device="cpu")
     except (zipfile.BadZipFile, KeyError, ValueError, EOFError, RuntimeError) as exc:

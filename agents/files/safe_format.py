@@ -3,7 +3,7 @@
 An agent is one folder (a *unit*) with two files:
 
 ``agent.json``
-    Plain JSON: the format version, the algorithm (``"ppo"`` or ``"sac"``), the
+    Plain JSON: the format version, the algorithm (``"ppo"``, ``"sac"`` or ``"tqc"``), the
     stable-baselines3 policy class and its constructor settings (``net_arch``,
     activation, ``log_std_init``, ...), the observation and action spaces (shape,
     dtype, bounds), the observation normalisation statistics (``mean``, ``var``,
@@ -83,9 +83,12 @@ FORMAT_VERSION = 1
 _POLICY_CLASSES = {
     ("ppo", "ActorCriticPolicy"): ("stable_baselines3.common.policies", "ActorCriticPolicy"),
     ("sac", "SACPolicy"): ("stable_baselines3.sac.policies", "SACPolicy"),
+    ("tqc", "TQCPolicy"): ("sb3_contrib.tqc.policies", "TQCPolicy"),
 }
-# the part of the policy that ``predict`` uses (SAC's critics are not needed to act)
-_WEIGHTS_MODULE = {"ppo": "policy", "sac": "actor"}
+# the part of the policy that ``predict`` uses (SAC's and TQC's critics are not needed to act)
+_WEIGHTS_MODULE = {"ppo": "policy", "sac": "actor", "tqc": "actor"}
+_PIP = {"sb3_contrib": "pip install sb3-contrib"}
+"""How to install a policy class's package that is an optional extra."""
 ALGOS = tuple(sorted(_WEIGHTS_MODULE))
 """The algorithms whose agents can be saved and loaded."""
 _REQUIRED = ("format", "format_version", "algo", "policy_class", "policy_kwargs",
@@ -179,8 +182,8 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
     path : path-like
         The agent folder (created; ``agent.json`` and ``policy.safetensors`` are replaced).
     policy : stable_baselines3 policy
-        ``model.policy`` of a PPO or SAC model.
-    algo : {"ppo", "sac"}
+        ``model.policy`` of a PPO, SAC or TQC model.
+    algo : {"ppo", "sac", "tqc"}
         The algorithm that trained it (recorded, so loading never guesses).
     norm : ObsNormalization or None
         Observation statistics of ``VecNormalize`` (None: observations are not
@@ -311,7 +314,12 @@ def load_agent(path):
     except PolicyJsonError as exc:
         raise AgentLoadError(str(exc)) from None
     module_name, cls_name = _POLICY_CLASSES[(meta["algo"], meta["policy_class"])]
-    policy_cls = getattr(importlib.import_module(module_name), cls_name)
+    try:
+        policy_cls = getattr(importlib.import_module(module_name), cls_name)
+    except ImportError:
+        package = module_name.split(".")[0]
+        raise AgentLoadError(f"{meta_path}: a {meta['algo'].upper()} agent needs {package}: "
+                             f"{_PIP.get(package, 'pip install ' + package)}") from None
     try:
         policy = policy_cls(obs_space, act_space, lambda _: 0.0, **kwargs)
     except TypeError as exc:

@@ -1,8 +1,10 @@
-"""SAC with optional action-smoothness terms in the actor loss (CAPS, Mysore et al. 2021).
+"""SAC and TQC with optional action-smoothness terms in the actor loss (CAPS, Mysore et al. 2021).
 
-:class:`CapsSAC` is the class ``train.py --algo sac`` trains: stable-baselines3's SAC
-with up to three penalties added to the actor loss, each on the policy's deterministic
-action mu(s) = tanh(mean(s)) in [-1, 1] (no sampling noise):
+:class:`CapsSAC` is the class ``train.py --algo sac`` trains, :class:`CapsTQC` (made on
+first use, from sb3-contrib's TQC: ``pip install sb3-contrib``) the one of ``--algo
+tqc``: the library's algorithm with up to three penalties added to the actor loss, each
+on the policy's deterministic action mu(s) = tanh(mean(s)) in [-1, 1] (no sampling
+noise):
 
 * temporal, ``caps_temporal`` * mean ||mu(s_t) - mu(s_t+1)||^2 over the replay batch's
   transitions (CAPS's L_T);
@@ -12,14 +14,19 @@ action mu(s) = tanh(mean(s)) in [-1, 1] (no sampling noise):
   the action is the change of the reel command, so this is the temporal smoothness of
   the command itself (the chattering metric is the total variation of the reel rates).
 
-With all three weights 0 (the default) the update is SAC's, step for step. The
-weights are on the scale of the actor loss, alpha log pi - Q, and Q is of the order of
-the discounted return.
+With all three weights 0 (the default) the update is the library's own ``train``, step
+for step. With a weight on, :meth:`CapsMixin.train` runs the update loop of
+stable-baselines3 2.x's ``SAC.train`` (which sb3-contrib's ``TQC.train`` shares line for
+line but for the critic's target and loss and the actor's value of its action: the two
+hooks :meth:`CapsMixin._critic_loss` and :meth:`CapsMixin._actor_value`) with the
+penalties added. The weights are on the scale of the actor loss, alpha log pi - Q, and
+Q is of the order of the discounted return.
 """
 
 from __future__ import annotations
 
 import inspect
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import torch as th
@@ -27,7 +34,11 @@ from stable_baselines3 import SAC
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
-__all__ = ["CapsSAC", "smoothness_terms"]
+__all__ = ["CapsMixin", "CapsSAC", "caps_tqc_class", "smoothness_terms"]
+
+CAPS_DEFAULTS = (("caps_temporal", 0.0), ("caps_spatial", 0.0), ("caps_magnitude", 0.0),
+                 ("caps_sigma", 0.05))
+"""The smoothness keyword arguments and their defaults (all terms off)."""
 
 
 def smoothness_terms(actor, obs: th.Tensor, next_obs: th.Tensor, sigma: float
@@ -50,8 +61,18 @@ def smoothness_terms(actor, obs: th.Tensor, next_obs: th.Tensor, sigma: float
     return temporal, spatial, magnitude
 
 
-class CapsSAC(SAC):
-    """SAC with CAPS smoothness penalties on its actor (module docstring).
+if TYPE_CHECKING:  # the mixin is always mixed into SAC or TQC, which share SAC's members
+    _OffPolicy = SAC
+else:
+    _OffPolicy = object
+
+
+class CapsMixin(_OffPolicy):
+    """CAPS smoothness penalties on an off-policy actor (module docstring).
+
+    Mixed in before stable-baselines3's SAC or sb3-contrib's TQC
+    (``class CapsSAC(CapsMixin, SAC)``), which give the ``_critic_loss`` and
+    ``_actor_value`` hooks below.
 
     Parameters
     ----------
@@ -61,7 +82,7 @@ class CapsSAC(SAC):
         Standard deviation of the observation perturbation of the spatial term, in
         the units the policy sees (normalised observations under ``VecNormalize``).
     *args, **kwargs
-        stable-baselines3 SAC's arguments.
+        The algorithm's own arguments.
     """
 
     def __init__(self, *args, caps_temporal: float = 0.0, caps_spatial: float = 0.0,
@@ -76,13 +97,13 @@ class CapsSAC(SAC):
         self.caps_sigma = float(caps_sigma)
         super().__init__(*args, **kwargs)
 
-    # SAC's keyword arguments and the penalties' (train.py checks config keys against it)
-    __init__.__signature__ = inspect.signature(  # type: ignore[attr-defined]
-        SAC.__init__).replace(parameters=[
-        *inspect.signature(SAC.__init__).parameters.values(),
-        *(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
-          for name, default in (("caps_temporal", 0.0), ("caps_spatial", 0.0),
-                                ("caps_magnitude", 0.0), ("caps_sigma", 0.05)))])
+    def _critic_loss(self, replay_data, ent_coef, discounts, batch_size: int) -> th.Tensor:
+        """The critics' loss on a replay batch (the algorithm's target)."""
+        raise NotImplementedError
+
+    def _actor_value(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """The critics' value (B, 1) of the actor's actions, which the actor maximises."""
+        raise NotImplementedError
 
     @property
     def smoothing(self) -> bool:
@@ -91,7 +112,7 @@ class CapsSAC(SAC):
                 or (self.caps_spatial > 0 and self.caps_sigma > 0))
 
     def train(self, gradient_steps: int, batch_size: int = 64) -> None:
-        """SAC's update (stable-baselines3 2.x ``SAC.train``) with the penalties added."""
+        """The algorithm's update (SB3 2.x ``SAC.train``'s loop) with the penalties added."""
         if not self.smoothing:
             super().train(gradient_steps, batch_size)
             return
@@ -127,25 +148,14 @@ class CapsSAC(SAC):
                 ent_coef_loss.backward()
                 self.ent_coef_optimizer.step()
 
-            with th.no_grad():
-                next_actions, next_log_prob = self.actor.action_log_prob(
-                    replay_data.next_observations)
-                next_q = th.cat(self.critic_target(replay_data.next_observations, next_actions),
-                                dim=1)
-                next_q, _ = th.min(next_q, dim=1, keepdim=True)
-                next_q = next_q - ent_coef * next_log_prob.reshape(-1, 1)
-                target_q = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q
-            current_q = self.critic(replay_data.observations, replay_data.actions)
-            critic_loss: th.Tensor = 0.5 * sum(  # type: ignore[assignment]
-                F.mse_loss(q, target_q) for q in current_q)
+            critic_loss = self._critic_loss(replay_data, ent_coef, discounts, batch_size)
             critic_losses.append(critic_loss.item())
             self.critic.optimizer.zero_grad()
             critic_loss.backward()
             self.critic.optimizer.step()
 
-            q_pi = th.cat(self.critic(replay_data.observations, actions_pi), dim=1)
-            min_q_pi, _ = th.min(q_pi, dim=1, keepdim=True)
-            actor_loss = (ent_coef * log_prob - min_q_pi).mean()
+            actor_loss = (ent_coef * log_prob
+                          - self._actor_value(replay_data.observations, actions_pi)).mean()
             temporal, spatial, magnitude = smoothness_terms(
                 self.actor, replay_data.observations, replay_data.next_observations,
                 self.caps_sigma if self.caps_spatial > 0 else 0.0)
@@ -173,3 +183,103 @@ class CapsSAC(SAC):
         self.logger.record("train/caps_magnitude", mean_terms[2])
         if ent_coef_losses:
             self.logger.record("train/ent_coef_loss", np.mean(ent_coef_losses))
+
+
+def _signature(base):
+    """``base.__init__``'s signature with the smoothness keywords.
+
+    train.py checks a config's keys against the signature of the class it trains.
+    """
+    params = inspect.signature(base.__init__).parameters.values()
+    return inspect.signature(base.__init__).replace(parameters=[
+        *params, *(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
+                   for name, default in CAPS_DEFAULTS)])
+
+
+class CapsSAC(CapsMixin, SAC):
+    """stable-baselines3's SAC with the CAPS penalties of :class:`CapsMixin`."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+
+    __init__.__signature__ = _signature(SAC)  # type: ignore[attr-defined]
+
+    def _critic_loss(self, replay_data, ent_coef, discounts, batch_size: int) -> th.Tensor:
+        """SAC's clipped double-Q target and the mean squared error of each critic."""
+        with th.no_grad():
+            next_actions, next_log_prob = self.actor.action_log_prob(
+                replay_data.next_observations)
+            next_q = th.cat(self.critic_target(replay_data.next_observations, next_actions),
+                            dim=1)
+            next_q, _ = th.min(next_q, dim=1, keepdim=True)
+            next_q = next_q - ent_coef * next_log_prob.reshape(-1, 1)
+            target_q = replay_data.rewards + (1 - replay_data.dones) * discounts * next_q
+        current_q = self.critic(replay_data.observations, replay_data.actions)
+        return 0.5 * sum(F.mse_loss(q, target_q) for q in current_q)  # type: ignore[return-value]
+
+    def _actor_value(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+        """The smallest of the critics' Q of the actor's action."""
+        q_pi = th.cat(self.critic(obs, actions), dim=1)
+        min_q_pi, _ = th.min(q_pi, dim=1, keepdim=True)
+        return min_q_pi
+
+
+_TQC_CLASS: list = []
+
+
+def caps_tqc_class():
+    """:class:`CapsTQC`, sb3-contrib's TQC with the CAPS penalties (made on first call).
+
+    Raises
+    ------
+    ImportError
+        When sb3-contrib is not installed, with the pip command that installs it.
+    """
+    if _TQC_CLASS:
+        return _TQC_CLASS[0]
+    try:
+        from sb3_contrib import TQC
+        from sb3_contrib.common.utils import quantile_huber_loss
+    except ImportError as exc:
+        raise ImportError("--algo tqc needs sb3-contrib: pip install \"tether_gym[tqc]\" "
+                          "(or pip install \"sb3-contrib>=2.4\")") from exc
+
+    class CapsTQC(CapsMixin, TQC):  # type: ignore[misc]  # mypy sees CapsMixin as SAC
+        """sb3-contrib's TQC with the CAPS penalties of :class:`CapsMixin`."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+
+        __init__.__signature__ = _signature(TQC)
+
+        def _critic_loss(self, replay_data, ent_coef, discounts, batch_size: int
+                         ) -> th.Tensor:
+            """TQC's truncated target and its quantile Huber loss.
+
+            All nets' quantiles at the next state, sorted, the top
+            ``top_quantiles_to_drop_per_net`` per net dropped.
+            """
+            with th.no_grad():
+                next_actions, next_log_prob = self.actor.action_log_prob(
+                    replay_data.next_observations)
+                next_quantiles = self.critic_target(replay_data.next_observations,
+                                                    next_actions)
+                critic: Any = self.critic  # TQC's quantile critics
+                n_target = (critic.quantiles_total
+                            - self.top_quantiles_to_drop_per_net * critic.n_critics)
+                next_quantiles, _ = th.sort(next_quantiles.reshape(batch_size, -1))
+                next_quantiles = next_quantiles[:, :n_target]
+                target = next_quantiles - ent_coef * next_log_prob.reshape(-1, 1)
+                target = replay_data.rewards + (1 - replay_data.dones) * discounts * target
+                target.unsqueeze_(dim=1)
+            current = self.critic(replay_data.observations, replay_data.actions)
+            return quantile_huber_loss(current, target, sum_over_quantiles=False)
+
+        def _actor_value(self, obs: th.Tensor, actions: th.Tensor) -> th.Tensor:
+            """The mean over nets and quantiles of the actor's action."""
+            return self.critic(obs, actions).mean(dim=2).mean(dim=1, keepdim=True)
+
+    CapsTQC.__qualname__ = "CapsTQC"
+    CapsTQC.__module__ = __name__
+    _TQC_CLASS.append(CapsTQC)
+    return CapsTQC

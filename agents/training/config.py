@@ -93,10 +93,11 @@ def fit_rollout(params: dict, algo: str, n_envs: int, timesteps: int
     ``batch_size`` at most the rollout. SAC (``learning_starts`` at or above the budget:
     no gradient step) is only noted. Returns ``(params, None)`` when nothing changes.
     """
-    if algo == "sac":
+    if algo != "ppo":
         starts = params.get("learning_starts", 100)
         if isinstance(starts, int) and starts >= timesteps:
-            return params, (f"--timesteps {timesteps} <= learning_starts {starts}: SAC takes no "
+            return params, (f"--timesteps {timesteps} <= learning_starts {starts}: "
+                            f"{algo.upper()} takes no "
                             "gradient step in this run (it only fills the replay buffer)")
         return params, None
     n_steps = params.get("n_steps", PPO_DEFAULTS["n_steps"])
@@ -123,16 +124,23 @@ def check_algo_params(params: dict, algo: str, source: str) -> None:
 
 
 def algo_class(algo: str):
-    """The class that trains ``algo`` (``"ppo"`` or ``"sac"``).
+    """The class that trains ``algo`` (``"ppo"``, ``"sac"`` or ``"tqc"``).
 
     stable-baselines3's PPO for ``"ppo"``; for ``"sac"``
     :class:`~tether_gym_agents.training.caps.CapsSAC`, which is SAC step for step unless
-    a config sets its ``caps_*`` smoothness weights.
+    a config sets its ``caps_*`` smoothness weights; for ``"tqc"`` likewise CapsTQC on
+    sb3-contrib's TQC (a ConfigError with the pip command when sb3-contrib is missing,
+    before any work).
     """
     from stable_baselines3 import PPO
 
-    from .caps import CapsSAC
+    from .caps import CapsSAC, caps_tqc_class
 
+    if algo == "tqc":
+        try:
+            return caps_tqc_class()
+        except ImportError as exc:
+            raise ConfigError(str(exc)) from None
     return {"ppo": PPO, "sac": CapsSAC}[algo]
 
 

@@ -319,8 +319,8 @@ def run_state(run_dir: Path, target: int) -> tuple[RunState, int]:
 
 def resume_command(settings: TrainSettings, steps: int) -> tuple[str, ...]:
     """The ``train.py`` arguments that continue the run of ``settings`` for ``steps``."""
-    return (*replace(settings.options, timesteps=None).argv(), "--resume", "--timesteps",
-            str(steps))
+    return (*replace(settings.options, timesteps=None).argv(keep=("seed",)), "--resume",
+            "--timesteps", str(steps))
 
 
 def _train_call(job: SeedJob, state: RunState, steps: int) -> str:

@@ -1,12 +1,12 @@
-"""The values of PPO's and SAC's hyperparameters, checked before any work is done.
+"""The values of PPO's, SAC's and TQC's hyperparameters, checked before any work is done.
 
 :func:`check_hyperparams` checks every keyword argument of stable-baselines3's PPO and
-SAC that a config may set (and ``policy`` and ``policy_kwargs``), so that a bad value
-is one line naming the key, the value and what is allowed instead of a traceback from
-stable-baselines3 or torch, or NaNs some updates later (``gamma: 2``). Values are
-checked as YAML gives them (plain data): ``activation_fn`` is a name from
-:data:`~tether_gym_agents.files.policy_json.ACTIVATIONS`, made a torch class by
-:func:`activation_class` when the model is built.
+SAC (and sb3-contrib's TQC) that a config may set (and ``policy`` and
+``policy_kwargs``), so that a bad value is one line naming the key, the value and what
+is allowed instead of a traceback from stable-baselines3 or torch, or NaNs some updates
+later (``gamma: 2``). Values are checked as YAML gives them (plain data):
+``activation_fn`` is a name from :data:`~tether_gym_agents.files.policy_json.ACTIVATIONS`,
+made a torch class by :func:`activation_class` when the model is built.
 """
 
 from __future__ import annotations
@@ -162,10 +162,14 @@ _CHECKS: dict[str, dict[str, Any]] = {
             "caps_temporal": _number(0.0), "caps_spatial": _number(0.0),
             "caps_magnitude": _number(0.0), "caps_sigma": _number(0.0)},
 }
-_NETS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf")}
+# sb3-contrib's TQC: SAC's arguments and the quantiles each critic drops from the target
+_CHECKS["tqc"] = {**_CHECKS["sac"], "top_quantiles_to_drop_per_net": _int_at_least(0)}
+_NETS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf"), "tqc": ("pi", "qf")}
 _POLICY_KWARGS: dict[str, dict[str, Any]] = {
     "ppo": {"ortho_init": _bool, "full_std": _bool, "squash_output": _bool},
     "sac": {"clip_mean": _number(0.0, low_open=True), "n_critics": _int_at_least(1)},
+    "tqc": {"clip_mean": _number(0.0, low_open=True), "n_critics": _int_at_least(1),
+            "n_quantiles": _int_at_least(1)},
 }
 _POLICY_KWARGS_COMMON = {"log_std_init": _number(-20.0, 20.0), "use_sde": _bool,
                          "use_expln": _bool, "share_features_extractor": _bool,
@@ -260,7 +264,7 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
         The algorithm's keyword arguments as read from YAML (``policy_kwargs`` included;
         keys not listed here, such as train.py's own, are left to the caller).
     algo : str
-        ``"ppo"`` or ``"sac"``.
+        ``"ppo"``, ``"sac"`` or ``"tqc"``.
     source : str
         The file the values came from (the start of the message).
     policy : str or None
@@ -277,6 +281,8 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
     for key, check in _CHECKS[algo].items():
         if key in params:
             _run(check, f"{source}: {key}", params[key])
+    if algo == "tqc":
+        _tqc_keeps_quantiles(params, source)
     kwargs = params.get("policy_kwargs")
     if kwargs is None:
         return
@@ -289,6 +295,17 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
             raise ValueError(f"{source}: policy_kwargs: unknown key {key!r} for "
                              f"{algo.upper()}; allowed: {sorted(checks)}")
         _run(checks[key], f"{source}: policy_kwargs.{key}", value)
+
+
+def _tqc_keeps_quantiles(params: dict, source: str) -> None:
+    """TQC's target keeps n_quantiles - top_quantiles_to_drop_per_net > 0 per critic."""
+    kwargs = params.get("policy_kwargs")
+    n_quantiles = kwargs.get("n_quantiles", 25) if isinstance(kwargs, dict) else 25
+    drop = params.get("top_quantiles_to_drop_per_net", 2)
+    if isinstance(n_quantiles, int) and isinstance(drop, int) and drop >= n_quantiles:
+        raise ValueError(f"{source}: top_quantiles_to_drop_per_net: {drop!r} must be < "
+                         f"policy_kwargs.n_quantiles ({n_quantiles}): each critic keeps "
+                         "at least one quantile for the target")
 
 
 def _run(check, where: str, value) -> None:

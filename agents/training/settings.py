@@ -22,6 +22,7 @@ import tether_gym
 
 from ..common.features import FeatureSpec
 from ..files.run_folder import CONFIG_FILE, read_config
+from ..files.safe_format import ALGOS
 from ..hybrids.residual_spec import ResidualSpec
 from .config import (
     CONFIG_DIR,
@@ -42,7 +43,6 @@ from .config import (
 __all__ = ["ALGOS", "SEED_MAX", "ConfigError", "TrainOptions", "TrainSettings",
            "resolve_settings"]
 
-ALGOS = ("ppo", "sac")
 SEED_MAX = 2**31 - 1
 _AT_LEAST_ONE = ("n_envs", "timesteps", "eval_freq", "checkpoint_freq", "eval_episodes",
                  "torch_threads", "seeds")
@@ -134,16 +134,17 @@ class TrainOptions:
         """``--env-kwargs`` as a dict of Python literals."""
         return parse_env_kwargs(list(self.env_kwargs))
 
-    def argv(self) -> tuple[str, ...]:
+    def argv(self, keep: tuple[str, ...] = ()) -> tuple[str, ...]:
         """The ``train.py`` arguments of these options.
 
-        Those that differ from their default, in ``--help`` order, paths made absolute
-        (the line runs on any node of a cluster).
+        Those that differ from their default, and the fields named in ``keep`` even at
+        their default, in ``--help`` order, paths made absolute (the line runs on any
+        node of a cluster).
         """
         out: list[str] = []
         for f in fields(self):
             value = getattr(self, f.name)
-            if value == f.default:
+            if value == f.default and f.name not in keep:
                 continue
             if isinstance(value, bool):
                 out.append(_flag(f.name))
@@ -231,7 +232,7 @@ class TrainSettings:
 
     @property
     def algo(self) -> str:
-        """``"ppo"`` or ``"sac"``."""
+        """``"ppo"``, ``"sac"`` or ``"tqc"``."""
         return self.options.algo
 
     @property
@@ -272,12 +273,14 @@ class TrainSettings:
 
         The record is copied with ``dataclasses.replace``: the same hyperparameters
         and env, the options of :meth:`TrainOptions.seed_run`, and the command line that
-        reproduces the seed as a single run (``command.txt``).
+        reproduces the seed as a single run (``command.txt``; ``--seed`` is written for
+        seed 0 too, so that every seed folder names its seed).
         """
         changes = {} if timesteps is None else {"timesteps": timesteps}
         options = self.options.seed_run(seed, out, **changes)
         return replace(self, options=options, out=Path(options.out or out),
-                       timesteps=timesteps or self.timesteps, command=options.argv())
+                       timesteps=timesteps or self.timesteps,
+                       command=options.argv(keep=("seed",)))
 
 
 def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = None

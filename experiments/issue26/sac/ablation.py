@@ -2,7 +2,8 @@
 
 Each cell is a hyperparameter file of ``cfg/`` (one change against ``capsA0g995``, the
 best single-seed probe of the first round). Every seed is a ``train.py`` run (``--algo
-sac`` trains CapsSAC, which reads the ``caps_*`` keys); a cell is scored as one policy
+sac`` trains CapsSAC, which reads the ``caps_*`` keys; the ``tqc`` cell is ``--algo
+tqc``, sb3-contrib's TQC with the same smoothness terms); a cell is scored as one policy
 with several runs by ``evaluate.py`` on the default suite (raw success over all
 episodes; RMS, effort and chattering are IQMs over runs x scenarios, with the 95 %
 bootstrap interval over runs for the RMS).
@@ -38,7 +39,11 @@ CELLS = {
     "gain025": "increment gain 0.25 (the env default) instead of 0.5",
     "mag20": "CAPS magnitude weight 20 (Q is of the order of 50-200 by 300k steps)",
     "sde8": "gSDE, noise held for 8 vector steps (train_freq 8, 16 gradient steps)",
+    "qf256": "critics [256, 256], actor [64, 64]",
+    "tqc": "TQC (sb3-contrib): 2 critics x 25 quantiles, top 2 per critic dropped",
 }
+ALGO = {"tqc": "tqc"}
+"""The cells not trained by ``--algo sac``."""
 
 
 def _finished(run: Path) -> bool:
@@ -52,7 +57,8 @@ def train(cells: list[str]) -> None:
             run = RUNS / cell / f"seed_{seed}"
             if _finished(run):
                 continue
-            subprocess.run([sys.executable, str(ROOT / "train.py"), "--algo", "sac",
+            subprocess.run([sys.executable, str(ROOT / "train.py"),
+                            "--algo", ALGO.get(cell, "sac"),
                             "--config", str(HERE / "cfg" / f"{cell}.yml"), "--seed", str(seed),
                             "--timesteps", str(STEPS), "--out", str(run), "--no-progress"],
                            check=True, cwd=ROOT)

@@ -25,10 +25,16 @@ def two_seeds(tmp_path_factory):
     return folder
 
 
-def test_curves_score_every_common_checkpoint_like_the_benchmark(two_seeds, tmp_path):
-    out = tmp_path / "curves"
+@pytest.fixture(scope="module")
+def curves_out(two_seeds, tmp_path_factory):
+    out = tmp_path_factory.mktemp("curves")
     assert evaluate_main(["curves", str(two_seeds), "--suite", "paper", "--seeds", "2",
                           "--out", str(out)]) == 0
+    return out
+
+
+def test_curves_score_every_common_checkpoint_like_the_benchmark(two_seeds, curves_out):
+    out = curves_out
     (curve,) = json.loads((out / "curves.json").read_text())
     steps = [p["steps"] for p in curve["points"]]
     assert steps == sorted(steps) and steps[0] == 256 and len(steps) >= 2
@@ -43,6 +49,28 @@ def test_curves_score_every_common_checkpoint_like_the_benchmark(two_seeds, tmp_
         assert walls == sorted(walls)
     assert (out / "curves.md").read_text().startswith(str(two_seeds))
     assert (out / "curves.png").is_file()
+
+
+def test_written_curves_are_read_not_evaluated_again(curves_out, tmp_path, capsys):
+    both = tmp_path / "both"
+    assert evaluate_main(["curves", str(curves_out), str(curves_out), "--suite", "paper",
+                          "--seeds", "2", "--rms", "1e9", "--success", "0",
+                          "--out", str(both)]) == 0
+    assert "reading its curves.json" in capsys.readouterr().out
+    (written,) = json.loads((curves_out / "curves.json").read_text())
+    combined = json.loads((both / "curves.json").read_text())
+    assert [c["points"] for c in combined] == [written["points"]] * 2
+    # the time to threshold is recomputed for the threshold asked now
+    first = next(p for p in written["points"] if p["tracking_rms"] is not None)
+    assert combined[1]["reached"]["steps"] == first["steps"]
+    assert combined[1]["threshold"] == {"rms": 1e9, "success": 0.0}
+    md = (both / "curves.md").read_text()
+    assert md.startswith("Time to tracking RMS <= 1e+09 rad at success >= 0")
+    assert md.count(f"| ppo | 2 | {written['points'][-1]['steps']} |") == 2
+    assert (both / "curves.png").is_file()
+    # curves of another suite or number of seeds are not put beside these
+    assert evaluate_main(["curves", str(curves_out), "--out", str(tmp_path / "x")]) == 2
+    assert "scored on suite 'paper' with 2 seeds" in capsys.readouterr().err
 
 
 def test_curves_refuse_bad_arguments(tmp_path, capsys):

@@ -226,3 +226,16 @@ def test_values_in_bounds_load_and_act(unit, tmp_path):
     assert np.isfinite(agent.predict(np.zeros(agent.observation_space.shape))[0]).all()
     big = _agent(tmp_path / "big", net_arch=(1024, 1024, 1024))
     assert TrainedAgent.load(big).algo == "ppo"
+
+
+def test_tqc_critics_are_counted_with_their_quantiles():
+    """A TQC critic has n_quantiles outputs: [1024, 1024] critics of 4096 quantiles build
+    2 nets x (critic + target) x 5.3M weights, over the bound; SAC's of one output do not."""
+    from tether_gym_agents.files.agent_values import ValueProblem, check_net_arch
+
+    check_net_arch("sac", {"net_arch": [1024, 1024]}, 12, 2)
+    check_net_arch("tqc", {"net_arch": [1024, 1024]}, 12, 2)  # 25 quantiles by default
+    with pytest.raises(ValueProblem, match=r"builds about 2[0-9],\d{3},\d{3} parameters"):
+        check_net_arch("tqc", {"net_arch": [1024, 1024], "n_quantiles": 4096}, 12, 2)
+    with pytest.raises(ValueProblem, match=r"policy_kwargs.n_critics='two'"):
+        check_net_arch("tqc", {"net_arch": [64], "n_critics": "two"}, 12, 2)

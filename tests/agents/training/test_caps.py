@@ -79,3 +79,112 @@ def test_train_py_trains_caps_sac_from_a_config(tmp_path):
             model.caps_sigma) == (3.0, 0.5, 0.0, 0.1)
     assert model.num_timesteps >= 384
 
+
+
+# --- TQC (sb3-contrib, the `tqc` extra) -------------------------------------------------
+
+def test_tqc_with_zero_weights_is_tqc_and_its_own_loop_matches_it():
+    from sb3_contrib import TQC
+
+    from tether_gym_agents.training.caps import caps_tqc_class
+
+    caps_tqc = caps_tqc_class()
+    assert caps_tqc is caps_tqc_class() and issubclass(caps_tqc, TQC)
+    th.manual_seed(0)
+    plain = _model(TQC).learn(120)
+    th.manual_seed(0)
+    zero = _model(caps_tqc).learn(120)
+    assert th.equal(_actor_weights(zero), _actor_weights(plain))
+    # the smoothing loop with a weight of ~0: TQC's target and loss, through the hooks
+    th.manual_seed(0)
+    loop = _model(caps_tqc, caps_magnitude=1e-300).learn(120)
+    assert loop.smoothing
+    np.testing.assert_allclose(_actor_weights(loop).numpy(), _actor_weights(plain).numpy(),
+                               atol=1e-5)
+    crit_loop = th.cat([p.detach().flatten() for p in loop.critic.parameters()])
+    crit_plain = th.cat([p.detach().flatten() for p in plain.critic.parameters()])
+    np.testing.assert_allclose(crit_loop.numpy(), crit_plain.numpy(), atol=1e-5)
+
+
+def test_tqc_magnitude_term_shrinks_the_actions():
+    from tether_gym_agents.training.caps import caps_tqc_class
+
+    model = _model(caps_tqc_class(), caps_magnitude=100.0).learn(400)
+    obs = th.as_tensor(model.replay_buffer.observations[:200, 0], dtype=th.float32)
+    _, _, magnitude = smoothness_terms(model.actor, obs, obs, 0.0)
+    assert magnitude.item() < 0.05
+
+
+def test_train_py_trains_tqc_and_evaluate_py_scores_it(tmp_path, capsys):
+    """--algo tqc through train.py (with resume) and the safe agent through evaluate.py."""
+    import json
+
+    import yaml
+
+    from tether_gym_agents.cli.evaluate import main as evaluate_main
+    from tether_gym_agents.cli.train import main
+    from tether_gym_agents.files.trained import TrainedAgent
+
+    cfg = tmp_path / "tqc.yml"
+    cfg.write_text(yaml.safe_dump({"default": {
+        "policy": "MlpPolicy", "learning_starts": 64, "batch_size": 32, "buffer_size": 2000,
+        "top_quantiles_to_drop_per_net": 3, "caps_magnitude": 1.0,
+        "policy_kwargs": {"net_arch": [16, 16], "n_quantiles": 5, "n_critics": 3}}}))
+    out = tmp_path / "run"
+    tiny = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq",
+            "256", "--eval-episodes", "1", "--env-kwargs", "orbits_per_episode=0.05"]
+    assert main(["--algo", "tqc", "--config", str(cfg), "--out", str(out), "--timesteps",
+                 "256", *tiny]) == 0
+    assert main(["--algo", "tqc", "--out", str(out), "--timesteps", "128", "--resume",
+                 *tiny]) == 0
+    model = caps_tqc_model(out)
+    assert (model.top_quantiles_to_drop_per_net, model.critic.n_quantiles,
+            model.critic.n_critics, model.caps_magnitude) == (3, 5, 3, 1.0)
+    meta = json.loads((out / "agent.json").read_text())
+    assert (meta["algo"], meta["policy_class"]) == ("tqc", "TQCPolicy")
+    agent = TrainedAgent.load(out)
+    assert agent.algo == "tqc" and agent.mlp is not None  # TQC's actor is SAC's MLP
+    obs = np.zeros(agent.model.observation_space.shape, dtype=np.float32)
+    action, _ = agent.predict(obs)
+    assert action.shape == (2,) and np.all(np.abs(action) <= 1.0)
+    capsys.readouterr()
+    assert evaluate_main([str(out), "--suite", "paper", "--seeds", "1", "--no-plots",
+                          "--env-kwargs", "orbits_per_episode=0.2", "--out",
+                          str(tmp_path / "eval")]) == 0
+    (block,) = json.loads((tmp_path / "eval" / "results.json").read_text())[
+        "policies"].values()
+    assert block["n_episodes"] == 1
+
+
+def caps_tqc_model(out):
+    from tether_gym_agents.training.caps import caps_tqc_class
+
+    return caps_tqc_class().load(out / "final_model.zip", device="cpu")  # our own file
+
+
+def test_tqc_quantiles_to_drop_are_checked_before_any_work(tmp_path, capsys):
+    import yaml
+
+    from tether_gym_agents.cli.train import main
+
+    cfg = tmp_path / "tqc.yml"
+    cfg.write_text(yaml.safe_dump({"default": {
+        "top_quantiles_to_drop_per_net": 5, "policy_kwargs": {"n_quantiles": 5}}}))
+    assert main(["--algo", "tqc", "--config", str(cfg), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert "top_quantiles_to_drop_per_net: 5 must be < policy_kwargs.n_quantiles (5)" in err
+    assert not (tmp_path / "r" / "config.yml").exists()
+
+
+def test_missing_sb3_contrib_names_the_pip_command(monkeypatch, tmp_path, capsys):
+    import sys
+
+    from tether_gym_agents.cli.train import main
+    from tether_gym_agents.training import caps
+
+    monkeypatch.setattr(caps, "_TQC_CLASS", [])
+    monkeypatch.setitem(sys.modules, "sb3_contrib", None)  # import sb3_contrib fails
+    with pytest.raises(ImportError, match="pip install"):
+        caps.caps_tqc_class()
+    assert main(["--algo", "tqc", "--out", str(tmp_path / "r")]) == 2
+    assert "pip install" in capsys.readouterr().err

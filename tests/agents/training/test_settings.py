@@ -68,7 +68,11 @@ def test_resolved_once_then_derived_per_seed(tmp_path):
     seed = settings.for_seed(7, tmp_path / "fan" / "seed_7", timesteps=32)
     assert (seed.seed, seed.timesteps, seed.out) == (7, 32, tmp_path / "fan" / "seed_7")
     assert seed.hyperparams == settings.hyperparams and seed.options.timesteps == 32
-    assert seed.command == seed.options.argv() and "--seed" in seed.command
+    assert seed.command == seed.options.argv(keep=("seed",))
+    assert seed.command[seed.command.index("--seed") + 1] == "7"
+    first = settings.for_seed(0, tmp_path / "fan" / "seed_0")  # seed 0 is named too
+    assert first.command[first.command.index("--seed") + 1] == "0"
+    assert "--seed" not in first.options.argv()  # the default, left out elsewhere
     config = seed.resolved_config()
     assert config["seed"] == 7 and config["hyperparams"]["n_envs"] == settings.n_envs
     with pytest.raises(ConfigError, match="n_envs 0: must be an integer >= 1"):
