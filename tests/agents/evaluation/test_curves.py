@@ -61,8 +61,10 @@ def test_written_curves_are_read_not_evaluated_again(curves_out, tmp_path, capsy
     combined = json.loads((both / "curves.json").read_text())
     assert [c["points"] for c in combined] == [written["points"]] * 2
     # the time to threshold is recomputed for the threshold asked now
-    first = next(p for p in written["points"] if p["tracking_rms"] is not None)
-    assert combined[1]["reached"]["steps"] == first["steps"]
+    # (a tiny run's episodes may all fail: no RMS, never reached)
+    first = next((p["steps"] for p in written["points"] if p["tracking_rms"] is not None),
+                 None)
+    assert (combined[1]["reached"] or {}).get("steps") == first
     assert combined[1]["threshold"] == {"rms": 1e9, "success": 0.0}
     md = (both / "curves.md").read_text()
     assert md.startswith("Time to tracking RMS <= 1e+09 rad at success >= 0")
