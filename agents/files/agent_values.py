@@ -23,8 +23,8 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-__all__ = ["ValueProblem", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS", "MAX_SPACE_SIZE",
-           "MAX_SPACE_DIMS", "NET_KEYS", "check_values", "tether_gym_env_ids"]
+__all__ = ["ValueProblem", "TQC_QUANTILES", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS",
+           "MAX_SPACE_SIZE", "MAX_SPACE_DIMS", "NET_KEYS", "check_values", "tether_gym_env_ids"]
 
 MAX_WIDTH = 4096
 """Widest hidden layer of a loaded policy [units]."""
@@ -39,7 +39,8 @@ MAX_SPACE_DIMS = 4
 NET_KEYS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf"), "tqc": ("pi", "qf")}
 """The networks a mapping ``net_arch`` may name, per algorithm."""
 _SAC_CRITICS = 2  # SB3's default n_critics; SAC also builds a target copy of the critics
-_TQC_QUANTILES = 25  # sb3-contrib's default n_quantiles: the outputs of each TQC critic
+TQC_QUANTILES = 25
+"""sb3-contrib's default ``n_quantiles``: the outputs of each TQC critic."""
 
 
 class ValueProblem(ValueError):
@@ -166,7 +167,7 @@ def check_net_arch(algo: str, kwargs, n_obs: int, n_act: int) -> None:
     else:
         pi = other = _layers(arch, key)
     if algo in ("sac", "tqc"):
-        outputs = 1 if algo == "sac" else _count(kwargs, "n_quantiles", _TQC_QUANTILES)
+        outputs = 1 if algo == "sac" else _count(kwargs, "n_quantiles", TQC_QUANTILES)
         n_critics = _SAC_CRITICS if algo == "sac" else _count(kwargs, "n_critics", _SAC_CRITICS)
         critics = 2 * n_critics * _mlp_parameters(n_obs + n_act, other, outputs)
         total = _mlp_parameters(n_obs, pi, 2 * n_act) + critics

@@ -30,6 +30,7 @@ from .run_folder import (
 from .safe_format import (
     AGENT_FILE,
     ALGOS,
+    SB3_CONTRIB_PIP,
     AgentLoadError,
     ObsNormalization,
     checked_file,
@@ -149,8 +150,7 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
         try:
             from sb3_contrib import TQC
         except ImportError:
-            raise AgentLoadError(f"{model_path} is a TQC model: pip install sb3-contrib") \
-                from None
+            raise AgentLoadError(f"{model_path} is a TQC model: {SB3_CONTRIB_PIP}") from None
         cls: Any = TQC
     else:
         cls = {"ppo": PPO, "sac": SAC}[algo]

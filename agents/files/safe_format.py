@@ -71,8 +71,8 @@ from .policy_json import (
 )
 
 __all__ = ["AgentLoadError", "ObsNormalization", "AGENT_FILE", "WEIGHTS_FILE", "FORMAT",
-           "FORMAT_VERSION", "ALGOS", "save_agent", "load_agent", "is_unit", "recorded_spec",
-           "normalization_of", "checked_file"]
+           "FORMAT_VERSION", "ALGOS", "SB3_CONTRIB_PIP", "save_agent", "load_agent", "is_unit",
+           "recorded_spec", "normalization_of", "checked_file"]
 
 AGENT_FILE = "agent.json"
 WEIGHTS_FILE = "policy.safetensors"
@@ -87,8 +87,9 @@ _POLICY_CLASSES = {
 }
 # the part of the policy that ``predict`` uses (SAC's and TQC's critics are not needed to act)
 _WEIGHTS_MODULE = {"ppo": "policy", "sac": "actor", "tqc": "actor"}
-_PIP = {"sb3_contrib": "pip install sb3-contrib"}
-"""How to install a policy class's package that is an optional extra."""
+SB3_CONTRIB_PIP = 'pip install "tether_gym[tqc]" (or pip install "sb3-contrib>=2.4")'
+"""How to install sb3-contrib, whose TQC is an optional extra."""
+_PIP = {"sb3_contrib": SB3_CONTRIB_PIP}
 ALGOS = tuple(sorted(_WEIGHTS_MODULE))
 """The algorithms whose agents can be saved and loaded."""
 _REQUIRED = ("format", "format_version", "algo", "policy_class", "policy_kwargs",

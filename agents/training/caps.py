@@ -34,6 +34,8 @@ from stable_baselines3 import SAC
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
+from ..files.safe_format import SB3_CONTRIB_PIP
+
 __all__ = ["CapsMixin", "CapsSAC", "caps_tqc_class", "smoothness_terms"]
 
 CAPS_DEFAULTS = (("caps_temporal", 0.0), ("caps_spatial", 0.0), ("caps_magnitude", 0.0),
@@ -241,8 +243,7 @@ def caps_tqc_class():
         from sb3_contrib import TQC
         from sb3_contrib.common.utils import quantile_huber_loss
     except ImportError as exc:
-        raise ImportError("--algo tqc needs sb3-contrib: pip install \"tether_gym[tqc]\" "
-                          "(or pip install \"sb3-contrib>=2.4\")") from exc
+        raise ImportError(f"--algo tqc needs sb3-contrib: {SB3_CONTRIB_PIP}") from exc
 
     class CapsTQC(CapsMixin, TQC):  # type: ignore[misc]  # mypy sees CapsMixin as SAC
         """sb3-contrib's TQC with the CAPS penalties of :class:`CapsMixin`."""

@@ -15,7 +15,7 @@ import math
 from typing import Any
 
 from ..files.agent_values import MAX_DEPTH as MAX_LAYERS
-from ..files.agent_values import MAX_PARAMETERS, MAX_WIDTH
+from ..files.agent_values import MAX_PARAMETERS, MAX_WIDTH, NET_KEYS, TQC_QUANTILES
 from ..files.policy_json import ACTIVATIONS
 
 __all__ = ["MAX_LAYERS", "MAX_WIDTH", "MAX_PARAMETERS", "POLICIES", "check_hyperparams",
@@ -164,13 +164,11 @@ _CHECKS: dict[str, dict[str, Any]] = {
 }
 # sb3-contrib's TQC: SAC's arguments and the quantiles each critic drops from the target
 _CHECKS["tqc"] = {**_CHECKS["sac"], "top_quantiles_to_drop_per_net": _int_at_least(0)}
-_NETS = {"ppo": ("pi", "vf"), "sac": ("pi", "qf"), "tqc": ("pi", "qf")}
 _POLICY_KWARGS: dict[str, dict[str, Any]] = {
     "ppo": {"ortho_init": _bool, "full_std": _bool, "squash_output": _bool},
     "sac": {"clip_mean": _number(0.0, low_open=True), "n_critics": _int_at_least(1)},
-    "tqc": {"clip_mean": _number(0.0, low_open=True), "n_critics": _int_at_least(1),
-            "n_quantiles": _int_at_least(1)},
 }
+_POLICY_KWARGS["tqc"] = {**_POLICY_KWARGS["sac"], "n_quantiles": _int_at_least(1)}
 _POLICY_KWARGS_COMMON = {"log_std_init": _number(-20.0, 20.0), "use_sde": _bool,
                          "use_expln": _bool, "share_features_extractor": _bool,
                          "normalize_images": _bool}
@@ -188,7 +186,7 @@ def _layers(value) -> None:
 
 
 def _net_arch(algo: str):
-    nets = _NETS[algo]
+    nets = NET_KEYS[algo]
 
     def check(value):
         if isinstance(value, dict) and value and set(value) <= set(nets):
@@ -300,7 +298,8 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
 def _tqc_keeps_quantiles(params: dict, source: str) -> None:
     """TQC's target keeps n_quantiles - top_quantiles_to_drop_per_net > 0 per critic."""
     kwargs = params.get("policy_kwargs")
-    n_quantiles = kwargs.get("n_quantiles", 25) if isinstance(kwargs, dict) else 25
+    n_quantiles = (kwargs.get("n_quantiles", TQC_QUANTILES) if isinstance(kwargs, dict)
+                   else TQC_QUANTILES)
     drop = params.get("top_quantiles_to_drop_per_net", 2)
     if isinstance(n_quantiles, int) and isinstance(drop, int) and drop >= n_quantiles:
         raise ValueError(f"{source}: top_quantiles_to_drop_per_net: {drop!r} must be < "
