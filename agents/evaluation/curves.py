@@ -110,9 +110,14 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
         shutil.rmtree(tmp, ignore_errors=True)
     n_runs = len(points[0][1])
     return {"policy": str(folder), "suite": suite, "seeds": n_seeds, "runs": n_runs,
-            "threshold": {"rms": threshold.rms, "success": threshold.success},
-            "points": out, "reached": _reached(out, threshold),
-            "per_seed": [_seed_reached(out, i, threshold) for i in range(n_runs)]}
+            "points": out, **_at_threshold(out, n_runs, threshold)}
+
+
+def _at_threshold(points: list[dict], n_runs: int, threshold: Threshold) -> dict:
+    """The ``threshold``, ``reached`` and ``per_seed`` entries of a curve of ``points``."""
+    return {"threshold": {"rms": threshold.rms, "success": threshold.success},
+            "reached": _reached(points, threshold),
+            "per_seed": [_seed_reached(points, i, threshold) for i in range(n_runs)]}
 
 
 def load_curves(folder: Path, suite: str, n_seeds: int,
@@ -133,9 +138,7 @@ def load_curves(folder: Path, suite: str, n_seeds: int,
             raise ValueError(f"{path}: {c.get('policy')} was scored on suite "
                              f"{c.get('suite')!r} with {c.get('seeds')} seeds per scenario, "
                              f"not on {suite!r} with {n_seeds} (give --suite and --seeds)")
-        c["threshold"] = {"rms": threshold.rms, "success": threshold.success}
-        c["reached"] = _reached(c["points"], threshold)
-        c["per_seed"] = [_seed_reached(c["points"], i, threshold) for i in range(c["runs"])]
+        c.update(_at_threshold(c["points"], c["runs"], threshold))
     return curves
 
 
@@ -175,6 +178,21 @@ def _fmt(x, spec: str) -> str:
     return "n/a" if x is None or not math.isfinite(x) else format(x, spec)
 
 
+def _rms_text(point: dict) -> str:
+    """A point's tracking RMS with its 95 % interval (when it has one)."""
+    ci = point["tracking_rms_ci95"]
+    ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
+    return f"{_fmt(point['tracking_rms'], '.2e')}{ci_text}"
+
+
+def _alone(curves: dict) -> str:
+    """How many seeds reach the threshold alone, and their median wall time."""
+    seeds = [s for s in curves["per_seed"] if s is not None]
+    return f"{len(seeds)} of {curves['runs']}" + (
+        f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min" if seeds
+        else "")
+
+
 def _minutes(walls: list[float]) -> str:
     walls = [w for w in walls if math.isfinite(w)]
     if not walls:
@@ -193,20 +211,14 @@ def summary_markdown(all_curves: list[dict]) -> str:
              "runs reaching it alone |", "|---|---|---|---|---|---|---|---|"]
     for c in all_curves:
         last = c["points"][-1]
-        ci = last["tracking_rms_ci95"]
-        ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
         reached = c["reached"]
         when = ("not reached" if reached is None else
                 f"{_fmt((reached['wall_time_s_median'] or math.nan) / 60, '.1f')} min, "
                 f"{reached['steps']} steps")
-        seeds = [s for s in c["per_seed"] if s is not None]
-        alone = f"{len(seeds)} of {c['runs']}" + (
-            f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min"
-            if seeds else "")
         lines.append(f"| {Path(c['policy']).name} | {c['runs']} | {last['steps']} | "
                      f"{_minutes(last['wall_time_s'])} | {last['success']:.3f} "
                      f"({last['survived']}/{last['episodes']}) | "
-                     f"{_fmt(last['tracking_rms'], '.2e')}{ci_text} | {when} | {alone} |")
+                     f"{_rms_text(last)} | {when} | {_alone(c)} |")
     return "\n".join(lines)
 
 
@@ -218,11 +230,8 @@ def markdown(curves: dict) -> str:
              "| env steps | wall time [min], median (range) | success | tracking RMS [rad] "
              "[95 % CI] |", "|---|---|---|---|"]
     for p in curves["points"]:
-        wall = _minutes(p["wall_time_s"])
-        ci = p["tracking_rms_ci95"]
-        ci_text = "" if ci is None else f" [{_fmt(ci[0], '.2e')}, {_fmt(ci[1], '.2e')}]"
-        lines.append(f"| {p['steps']} | {wall} | {p['success']:.3f} ({p['survived']}/"
-                     f"{p['episodes']}) | {_fmt(p['tracking_rms'], '.2e')}{ci_text} |")
+        lines.append(f"| {p['steps']} | {_minutes(p['wall_time_s'])} | {p['success']:.3f} "
+                     f"({p['survived']}/{p['episodes']}) | {_rms_text(p)} |")
     reached = curves["reached"]
     target = f"tracking RMS <= {th['rms']:g} rad at success >= {th['success']:g}"
     if reached is None:
@@ -232,10 +241,7 @@ def markdown(curves: dict) -> str:
         lines += ["", f"Reached ({target}) at {reached['steps']} env steps, "
                       f"{_fmt((reached['wall_time_s_median'] or math.nan) / 60, '.1f')} min "
                       f"median wall time ({lo / 60:.1f}-{hi / 60:.1f} over the seeds)."]
-    seeds = [s for s in curves["per_seed"] if s is not None]
-    lines.append(f"Seeds reaching it alone: {len(seeds)} of {curves['runs']}" + (
-        f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min" if seeds
-        else "") + ".")
+    lines.append(f"Seeds reaching it alone: {_alone(curves)}.")
     return "\n".join(lines)
 
 
