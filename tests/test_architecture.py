@@ -34,7 +34,7 @@ MAX_PARAMETERS = 10
 AGENTS = ROOT / "agents"
 AGENTS_NAME = "tether_gym_agents"
 AGENT_RANKS = {"common": 0, "baselines": 1, "hybrids": 2, "files": 3,
-               "evaluation": 4, "training": 4, "paper": 5, "cli": 6}
+               "evaluation": 4, "training": 4, "accel": 4, "paper": 5, "cli": 6}
 
 
 def _modules():
@@ -308,7 +308,7 @@ def test_the_rank_check_catches_upward_sideways_and_root_imports():
     assert _fake_violations("tether_gym_agents.cli") == []
     assert _fake_violations("tether_gym_agents.tools") == [
         "tether_gym_agents.tools is in no ranked subpackage "
-        "(common, baselines, hybrids, files, evaluation, training, paper, cli)"]
+        "(common, baselines, hybrids, files, evaluation, training, accel, paper, cli)"]
 
 
 def test_the_cycle_check_reports_every_cycle():

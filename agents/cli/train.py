@@ -49,6 +49,10 @@ __all__ = ["main", "build_parser"]
 def main(argv=None) -> int:
     """Command line of ``train.py``; returns the exit code."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["gpu"]:  # PPO with env and learner on a torch device
+        from ..accel.cli import main as gpu_main
+
+        return gpu_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         options = TrainOptions.from_namespace(args)

@@ -1,0 +1,189 @@
+"""``python train.py gpu``: PPO with the env and the learner on one torch device.
+
+    python train.py gpu --config configs/ppo_gpu.yml --seeds 10 --out runs/ppo_gpu
+
+trains seeds --seed .. --seed+N-1 in one process (all at once, each with its own envs,
+statistics and weights) and writes ``OUT/seed_K/`` run folders that ``python
+evaluate.py OUT`` scores on the standard numba env, and ``python evaluate.py curves
+OUT`` along its checkpoints. ``--device auto`` (default) takes the GPU when torch sees
+one, else the CPU (slow, but the same code: what the tests run).
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import shlex
+import sys
+import time
+from dataclasses import fields
+from pathlib import Path
+
+__all__ = ["main", "read_config", "DEFAULT_CONFIG"]
+
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "ppo_gpu.yml"
+MAX_CONFIG_BYTES = 1 << 20
+"""A config file larger than this [bytes] is refused before it is parsed."""
+MAX_SEEDS = 64
+MAX_ENVS = 1 << 22
+"""Envs per process (seeds x n_envs) at most: 4M rows, about 2 GB of float64 state."""
+
+
+class GpuConfigError(ValueError):
+    """A bad ``train.py gpu`` argument or config value (printed as one line, exit 2)."""
+
+
+def _check_number(path, key, value, low, high, integer=False):
+    """``value`` as an int/float in [low, high], or GpuConfigError naming file and key."""
+    kind = int if integer else float
+    ok = (not isinstance(value, bool) and isinstance(value, (int, float))
+          and (not integer or float(value).is_integer()) and low <= value <= high)
+    if not ok:
+        what = "an integer" if integer else "a number"
+        raise GpuConfigError(f"{path}: {key}={value!r} must be {what} in [{low:g}, {high:g}]")
+    return kind(value)
+
+
+_BOUNDS = {  # key: (low, high, integer)
+    "n_envs": (1, MAX_ENVS, True), "n_steps": (1, 4096, True),
+    "batch_size": (1, 1 << 24, True), "n_epochs": (1, 100, True),
+    "gamma": (0.0, 1.0, False), "gae_lambda": (0.0, 1.0, False),
+    "learning_rate": (1e-8, 1.0, False), "clip_range": (1e-4, 10.0, False),
+    "ent_coef": (0.0, 1.0, False), "vf_coef": (0.0, 10.0, False),
+    "max_grad_norm": (1e-6, 1e3, False), "log_std_init": (-20.0, 2.0, False),
+    "clip_obs": (1e-3, 1e6, False), "clip_reward": (1e-3, 1e6, False),
+    "norm_epsilon": (1e-12, 1.0, False), "desired_kl": (1e-6, 1.0, False),
+}
+
+
+def read_config(path: Path) -> tuple:
+    """(PPOSettings, n_timesteps, env_kwargs, checkpoints) from a ``ppo_gpu`` YAML file.
+
+    Keys: those of :class:`~.ppo.PPOSettings`, ``n_timesteps`` (env steps per seed),
+    ``checkpoints`` (agent snapshots per run) and ``env_kwargs``; unknown keys, values
+    out of range and files that are not small plain YAML raise GpuConfigError.
+    """
+    import yaml
+
+    from .ppo import PPOSettings
+
+    path = Path(path)
+    if not path.is_file():
+        raise GpuConfigError(f"config {path} is not a regular file")
+    if path.stat().st_size > MAX_CONFIG_BYTES:
+        raise GpuConfigError(f"config {path} is larger than {MAX_CONFIG_BYTES} bytes")
+    try:
+        text = path.read_text()
+        doc = yaml.safe_load(text)
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
+        raise GpuConfigError(f"config {path} is not readable YAML: {exc}") from None
+    if "&" in text and "*" in text:
+        raise GpuConfigError(f"config {path}: YAML anchors and aliases are not accepted")
+    if not isinstance(doc, dict):
+        raise GpuConfigError(f"config {path} must be a mapping of keys, got {type(doc).__name__}")
+    names = {f.name for f in fields(PPOSettings)}
+    extra = {"n_timesteps", "env_kwargs", "checkpoints"}
+    unknown = sorted(set(doc) - names - extra)
+    if unknown:
+        raise GpuConfigError(f"{path}: unknown key(s) {unknown}; valid: "
+                             f"{sorted(names | extra)}")
+    values = {}
+    for key, value in doc.items():
+        if key in _BOUNDS:
+            low, high, integer = _BOUNDS[key]
+            values[key] = _check_number(path, key, value, low, high, integer)
+    if "net_arch" in doc:
+        arch = doc["net_arch"]
+        if (not isinstance(arch, list) or not 1 <= len(arch) <= 4
+                or not all(isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= 1024
+                           for w in arch)):
+            raise GpuConfigError(f"{path}: net_arch={arch!r} must be a list of 1 to 4 "
+                                 "layer widths in [1, 1024]")
+        values["net_arch"] = tuple(arch)
+    if "lr_schedule" in doc:
+        if doc["lr_schedule"] not in ("linear", "constant", "adaptive"):
+            raise GpuConfigError(f"{path}: lr_schedule={doc['lr_schedule']!r} must be "
+                                 "'linear', 'constant' or 'adaptive'")
+        values["lr_schedule"] = doc["lr_schedule"]
+    steps = _check_number(path, "n_timesteps", doc.get("n_timesteps", 5_000_000), 1, 1e10,
+                          integer=True)
+    checkpoints = _check_number(path, "checkpoints", doc.get("checkpoints", 10), 1, 100,
+                                integer=True)
+    env_kwargs = doc.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise GpuConfigError(f"{path}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    return PPOSettings(**values), steps, env_kwargs, checkpoints
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The arguments of ``train.py gpu``."""
+    p = argparse.ArgumentParser(prog="train.py gpu",
+                                description="PPO with env and learner on one torch device.")
+    p.add_argument("--config", type=Path, default=DEFAULT_CONFIG,
+                   help="ppo_gpu YAML (default: the packaged configs/ppo_gpu.yml)")
+    p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
+    p.add_argument("--seeds", type=int, default=1, help="seeds trained at once (default 1)")
+    p.add_argument("--timesteps", type=int, default=None, help="env steps per seed")
+    p.add_argument("--n-envs", type=int, default=None, help="envs per seed")
+    p.add_argument("--device", default="auto", help="cuda, cuda:K, cpu or auto (default)")
+    p.add_argument("--out", type=Path, default=Path("runs/ppo_gpu"), help="output folder")
+    p.add_argument("--max-seconds", type=float, default=None,
+                   help="stop after the update that passes this wall time [s] (start-up "
+                        "included); the runs record the steps reached")
+    return p
+
+
+def main(argv=None, clock_start: float | None = None) -> int:
+    """Parse, train and print a summary; 2 with one line on a bad argument."""
+    start = time.perf_counter() if clock_start is None else clock_start
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser().parse_args(argv)
+    try:
+        import torch  # noqa: F401
+    except ImportError:
+        print('train.py gpu: error: needs torch: pip install -e ".[gpu]" (on CPU-only '
+              "machines pip install torch==2.13.0 first)", file=sys.stderr)
+        return 2
+    from dataclasses import replace
+
+    from .trainer import GpuRun, train_seeds
+    from .vec_env import resolve_device
+
+    try:
+        settings, steps, env_kwargs, checkpoints = read_config(args.config)
+        if not 0 <= args.seed <= 2**31 - 1:
+            raise GpuConfigError(f"--seed={args.seed} must be in [0, {2**31 - 1}]")
+        if not 1 <= args.seeds <= MAX_SEEDS:
+            raise GpuConfigError(f"--seeds={args.seeds} must be in [1, {MAX_SEEDS}]")
+        if args.timesteps is not None:
+            steps = _check_number("--timesteps", "value", args.timesteps, 1, 1e10, True)
+        if args.n_envs is not None:
+            settings = replace(settings, n_envs=_check_number("--n-envs", "value",
+                                                              args.n_envs, 1, MAX_ENVS, True))
+        if settings.n_envs * args.seeds > MAX_ENVS:
+            raise GpuConfigError(f"n_envs x seeds = {settings.n_envs * args.seeds} must be "
+                                 f"<= {MAX_ENVS}")
+        if str(args.out) in ("", "."):
+            raise GpuConfigError("--out must name a new or existing run folder, not ''")
+        max_seconds = (math.inf if args.max_seconds is None else
+                       _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
+        device = resolve_device(args.device)
+    except ValueError as exc:
+        print(f"train.py gpu: error: {exc}", file=sys.stderr)
+        return 2
+    seeds = list(range(args.seed, args.seed + args.seeds))
+    command = "python train.py gpu " + " ".join(shlex.quote(a) for a in argv)
+    print(f"train.py gpu: {len(seeds)} seed(s) x {settings.n_envs} envs on {device}, "
+          f"{steps} env steps per seed -> {args.out}")
+    summary = train_seeds(settings, GpuRun(seeds, steps, env_kwargs, args.out, device,
+                                           checkpoints=checkpoints, command=command,
+                                           clock_start=start, max_seconds=max_seconds))
+    print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
+          f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
+          "over all seeds, start-up included)")
+    final = summary["final"]
+    for i, seed in enumerate(seeds):
+        print(f"  seed {seed}: training distribution, deterministic, 64 episodes: survived "
+              f"{final['survived'][i]:.3f}, tracking RMS {final['tracking_rms'][i]} rad, "
+              f"return {final['mean_return'][i]:.1f}")
+    return 0

@@ -1,0 +1,336 @@
+"""One GPU PPO run: S seeds trained at once on one device, each written as a seed run folder.
+
+Per seed ``OUT/seed_K/`` holds what ``python evaluate.py OUT`` reads (``agent.json`` +
+``policy.safetensors``: the agent at the last step), its checkpoints
+(``checkpoints/agent_<N>_steps/``, each recording its env steps and the wall time then,
+for ``python evaluate.py curves OUT``), ``train_info.json`` (steps, wall time, device),
+``config.yml`` and ``command.txt``. Wall times count from the start of the call
+(process start-up, imports and compilation included, as the issue's targets count
+them), and the training rollouts' episode statistics go into ``train_log.json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+import tether_gym
+
+from ..files.run_folder import (
+    CHECKPOINT_AGENT_PREFIX,
+    CHECKPOINT_DIR,
+    append_command,
+    seed_dir,
+    write_config,
+    write_train_info,
+)
+from ..files.safe_format import ObsNormalization, save_agent
+from .ppo import MultiSeedPolicy, PPOSettings, RunningStats, learning_rate_at
+from .vec_env import TorchTetherVecEnv
+
+__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE"]
+
+TRAIN_LOG_FILE = "train_log.json"
+
+
+def _normalize(obs: torch.Tensor, stats: RunningStats, s: PPOSettings) -> torch.Tensor:
+    """VecNormalize's observation formula, per seed: clip((x - mean) / sqrt(var + eps))."""
+    x = (obs.to(stats.mean.dtype) - stats.mean[:, None, :]) \
+        / torch.sqrt(stats.var[:, None, :] + s.norm_epsilon)
+    return torch.clamp(x, -s.clip_obs, s.clip_obs).to(torch.float32)
+
+
+def _sb3_policy(policy: MultiSeedPolicy, s: int, env: TorchTetherVecEnv, settings: PPOSettings):
+    """Seed s's weights in a stable-baselines3 ``ActorCriticPolicy`` (for save_agent)."""
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    sb3 = ActorCriticPolicy(env.single_observation_space, env.single_action_space,
+                            lambda _: 0.0, net_arch=list(settings.net_arch),
+                            log_std_init=settings.log_std_init)
+    sb3.load_state_dict(policy.sb3_state_dict(s), strict=True)
+    return sb3
+
+
+def _write_agents(runs, policy, stats, env, settings, env_kwargs, training, folder):
+    """Save every seed's agent into ``run / folder`` (the run's top for ``"."``)."""
+    for s, run in enumerate(runs):
+        norm = ObsNormalization(stats.mean[s].cpu().numpy(), stats.var[s].cpu().numpy(),
+                                float(stats.count[s]), settings.clip_obs, settings.norm_epsilon)
+        save_agent(run / folder, _sb3_policy(policy, s, env, settings), "ppo", norm,
+                   env_id=tether_gym.ENV_ID, env_kwargs=env_kwargs,
+                   training={**training[s], "seed": policy.seeds[s]})
+
+
+@dataclass(frozen=True)
+class GpuRun:
+    """What one ``train.py gpu`` call trains and where (besides the PPO settings).
+
+    ``seeds``: trained at once; ``timesteps``: env steps per seed; ``max_seconds``: stop
+    after the first update that ends later than this wall time [s] (counted from
+    ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
+    agent snapshots per run; ``eval_episodes``: the final check's episodes per seed.
+    """
+
+    seeds: list[int]
+    timesteps: int
+    env_kwargs: dict
+    out: Path
+    device: torch.device
+    checkpoints: int = 10
+    command: str = ""
+    clock_start: float | None = None
+    max_seconds: float = math.inf
+    eval_episodes: int = 64
+
+
+def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
+    """Train ``len(run.seeds)`` PPO seeds for ``run.timesteps`` env steps each; write them.
+
+    Returns a summary (steps, wall time, env steps per second, the checkpoints' episode
+    statistics, the final check on the training distribution).
+    """
+    seeds, timesteps, env_kwargs, out, device = (run.seeds, run.timesteps, run.env_kwargs,
+                                                 run.out, run.device)
+    checkpoints, command, clock_start = run.checkpoints, run.command, run.clock_start
+    max_seconds, eval_episodes = run.max_seconds, run.eval_episodes
+    t0 = time.perf_counter() if clock_start is None else clock_start
+    S, N, T = len(seeds), settings.n_envs, settings.n_steps
+    torch.manual_seed(int(seeds[0]))
+    env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
+                            autoreset_mode="same_step", check_actions=False, **env_kwargs)
+    d, a = env.observation_dim, env.n
+    policy = MultiSeedPolicy(seeds, d, a, settings, device)
+    # lr 1: each seed's step size scales its gradient instead (see _update), so that the
+    # seeds of one optimizer can have their own (adaptive) learning rates
+    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5,
+                           fused=device.type == "cuda")
+    obs_stats = RunningStats(S, d, device)
+    ret_stats = RunningStats(S, 1, device)
+    returns = torch.zeros((S, N), dtype=torch.float64, device=device)
+    runs = [seed_dir(out, k) for k in seeds]
+    for folder in runs:
+        folder.mkdir(parents=True, exist_ok=True)
+        write_config(folder, {"algo": "ppo_gpu", "env_id": tether_gym.ENV_ID,
+                              "hyperparams": {**asdict(settings),
+                                              "net_arch": list(settings.net_arch),
+                                              "n_timesteps": timesteps},
+                              "env_kwargs": env_kwargs})
+        if command:
+            append_command(folder, command)
+    raw, _ = env.reset()
+    obs_raw = raw.view(S, N, d)
+    obs_stats.update(obs_raw)
+    obs = _normalize(obs_raw, obs_stats, settings)
+    episode_start = torch.ones((S, N), dtype=torch.bool, device=device)
+    buf_obs = torch.zeros((T, S, N, d), device=device)
+    buf_act = torch.zeros((T, S, N, a), device=device)
+    buf_logp = torch.zeros((T, S, N), device=device)
+    buf_val = torch.zeros((T, S, N), device=device)
+    buf_rew = torch.zeros((T, S, N), device=device)
+    buf_start = torch.zeros((T, S, N), device=device)
+    ep_ret = torch.zeros((S, N), dtype=torch.float64, device=device)
+    done_eps = torch.zeros(S, device=device)
+    done_fail = torch.zeros(S, device=device)
+    done_ret = torch.zeros(S, dtype=torch.float64, device=device)
+    per_rollout = T * N
+    n_updates = max(1, math.ceil(timesteps / per_rollout))
+    marks = sorted({max(1, round(n_updates * (i + 1) / checkpoints))
+                    for i in range(max(1, checkpoints))})
+    history: list[dict[str, Any]] = []
+    steps = 0
+    lr = torch.full((S,), settings.learning_rate, device=device)  # adaptive: per seed
+    for update in range(1, n_updates + 1):
+        # the linear schedule falls to 0 at the step budget, or at the time budget first
+        progress = 1.0 - max(steps / (n_updates * per_rollout),
+                             (time.perf_counter() - t0) / max_seconds)
+        if settings.lr_schedule != "adaptive":
+            lr.fill_(learning_rate_at(settings, progress))
+        with torch.no_grad():
+            for t in range(T):
+                dist = policy.distribution(obs)
+                act = dist.sample()
+                buf_obs[t], buf_act[t], buf_start[t] = obs, act, episode_start.float()
+                buf_logp[t] = dist.log_prob(act).sum(-1)
+                buf_val[t] = policy.value(obs)
+                raw, rew, term, trunc, info = env.step(
+                    torch.clamp(act, -1.0, 1.0).view(S * N, a))
+                rew = rew.view(S, N)
+                term, trunc = term.view(S, N), trunc.view(S, N)
+                done = term | trunc
+                obs_raw = raw.view(S, N, d)
+                obs_stats.update(obs_raw)
+                obs = _normalize(obs_raw, obs_stats, settings)
+                # VecNormalize's reward scaling by the running discounted return's std
+                returns = returns * settings.gamma + rew
+                ret_stats.update(returns[..., None])
+                scale = torch.sqrt(ret_stats.var[:, :1] + settings.norm_epsilon)
+                scaled = torch.clamp(rew / scale, -settings.clip_reward, settings.clip_reward)
+                returns = torch.where(done, torch.zeros_like(returns), returns)
+                # bootstrap the value of a truncated episode's last observation (SB3's PPO)
+                last_obs = _normalize(info["final_obs"].view(S, N, d), obs_stats, settings)
+                boot = settings.gamma * policy.value(last_obs)
+                scaled = scaled + torch.where(trunc, boot.to(scaled.dtype),
+                                              torch.zeros_like(scaled))
+                buf_rew[t] = scaled.float()
+                ep_ret += rew
+                done_eps += done.sum(dim=1)
+                done_fail += term.sum(dim=1)
+                done_ret += torch.where(done, ep_ret, torch.zeros_like(ep_ret)).sum(dim=1)
+                ep_ret = torch.where(done, torch.zeros_like(ep_ret), ep_ret)
+                episode_start = done
+            last_val = policy.value(obs)
+            adv = torch.zeros_like(buf_rew)
+            gae = torch.zeros((S, N), device=device)
+            for t in range(T - 1, -1, -1):
+                if t == T - 1:
+                    nonterminal, next_val = 1.0 - episode_start.float(), last_val
+                else:
+                    nonterminal, next_val = 1.0 - buf_start[t + 1], buf_val[t + 1]
+                delta = buf_rew[t] + settings.gamma * next_val * nonterminal - buf_val[t]
+                gae = delta + settings.gamma * settings.gae_lambda * nonterminal * gae
+                adv[t] = gae
+            ret = adv + buf_val
+        steps += per_rollout
+        _update(policy, opt, lr, settings, buf_obs, buf_act, buf_logp, adv, ret)
+        out_of_time = time.perf_counter() - t0 > max_seconds
+        if update in marks or out_of_time:
+            wall = time.perf_counter() - t0
+            record: dict[str, Any] = {"steps": steps, "wall_time_s": round(wall, 2),
+                      "episodes": done_eps.tolist(),
+                      "failed": done_fail.tolist(),
+                      "mean_return": (done_ret / done_eps.clamp(min=1)).tolist()}
+            history.append(record)
+            done_eps.zero_()
+            done_fail.zero_()
+            done_ret.zero_()
+            training = [{"command": command, "num_timesteps": steps,
+                         "wall_time_s": round(wall, 1), "device": str(device)}] * S
+            _write_agents(runs, policy, obs_stats, env, settings, env_kwargs, training,
+                          f"{CHECKPOINT_DIR}/{CHECKPOINT_AGENT_PREFIX}_{steps}_steps")
+            if log:
+                rate = steps * S / max(wall, 1e-9)
+                log(f"  {steps} steps per seed, {wall:.1f} s ({rate:,.0f} env steps/s over "
+                    f"{S} seeds); training episodes ended {int(sum(record['episodes']))}, "
+                    f"failed {int(sum(record['failed']))}, mean return "
+                    f"{np.mean(record['mean_return']):.1f}")
+        if out_of_time:
+            if log:
+                log(f"  stopped at {steps} steps per seed: --max-seconds {max_seconds:g} reached")
+            break
+    wall = time.perf_counter() - t0
+    training = [{"command": command, "num_timesteps": steps, "wall_time_s": round(wall, 1),
+                 "device": str(device)}] * S
+    final = evaluate_on_device(policy, obs_stats, settings, env_kwargs, device,
+                               episodes=eval_episodes, seed=int(seeds[0]) + 10_000)
+    _write_agents(runs, policy, obs_stats, env, settings, env_kwargs, training, ".")
+    device_name = (torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu")
+    for s, folder in enumerate(runs):
+        write_train_info(folder, {"algo": "ppo_gpu", "env_id": tether_gym.ENV_ID,
+                               "seed": seeds[s], "seeds_in_process": S, "device": device_name,
+                               "command": command, "tether_gym": tether_gym.__version__,
+                               "torch": torch.__version__, "status": "finished",
+                               "num_timesteps": steps, "wall_time_s": round(wall, 1),
+                               "final_training_distribution": {
+                                   k: v[s] for k, v in final.items()}})
+        (folder / TRAIN_LOG_FILE).write_text(json.dumps(
+            [{**h, "episodes": h["episodes"][s], "failed": h["failed"][s],
+              "mean_return": h["mean_return"][s]} for h in history], indent=1))
+    return {"steps_per_seed": steps, "seeds": S, "wall_time_s": wall,
+            "env_steps_per_s": steps * S / wall, "history": history, "final": final}
+
+
+def evaluate_on_device(policy, obs_stats, settings, env_kwargs, device, episodes: int,
+                       seed: int) -> dict[str, list[float]]:
+    """Each seed's deterministic policy over ``episodes`` whole episodes, on the device.
+
+    The training distribution (``env_kwargs``), not a benchmark suite: a check of the
+    run itself. Returns per seed the mean episode return, the fraction of episodes
+    that survive and the RMS of theta - theta_d over the survivors' steps after orbit 1.
+    """
+    S = len(policy.seeds)
+    env = TorchTetherVecEnv(S * episodes, device=device, seed=seed, check_actions=False,
+                            **env_kwargs)
+    d, a = env.observation_dim, env.n
+    raw, _ = env.reset()
+    alive = torch.ones((S, episodes), dtype=torch.bool, device=device)
+    survived = torch.ones_like(alive)
+    ret = torch.zeros((S, episodes), dtype=torch.float64, device=device)
+    sq = torch.zeros_like(ret)
+    count = torch.zeros_like(ret)
+    per_orbit = env.config.max_episode_steps / env.config.orbits_per_episode
+    with torch.no_grad():
+        for t in range(env.config.max_episode_steps):
+            obs = _normalize(raw.view(S, episodes, d), obs_stats, settings)
+            act = torch.clamp(policy.mean_action(obs), -1.0, 1.0).to(torch.float64)
+            raw, rew, term, trunc, info = env.step(act.view(S * episodes, a))
+            rew, term, trunc = (x.view(S, episodes) for x in (rew, term, trunc))
+            ret += torch.where(alive, rew, torch.zeros_like(rew))
+            if t >= per_orbit:
+                err = (info["theta"] - info["theta_ref"][:, None]).view(S, episodes, a)
+                sq += torch.where(alive, err.square().mean(-1), torch.zeros_like(ret))
+                count += alive.double()
+            survived &= ~(term & alive)
+            alive &= ~(term | trunc)
+    ok = survived.double()
+    steps = (count * ok).sum(1)
+    rms = torch.sqrt((sq * ok).sum(1) / steps.clamp(min=1))
+    return {"mean_return": ret.mean(1).tolist(), "survived": ok.mean(1).tolist(),
+            # None: no episode survived past orbit 1 (no figure, rather than a fake 0)
+            "tracking_rms": [float(r) if n > 0 else None for r, n in zip(rms, steps,
+                                                                       strict=True)]}
+
+
+def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
+    """Rows ``idx`` (S, b) of each seed's samples x (S, M, ...)."""
+    S = x.shape[0]
+    return torch.gather(x, 1, idx.view(S, -1, *([1] * (x.dim() - 2))).expand(-1, -1, *x.shape[2:]))
+
+
+def _update(policy, opt, lr, settings: PPOSettings, obs, act, old_logp, adv, ret) -> None:
+    """``n_epochs`` passes of clipped-surrogate minibatch updates, per seed independent.
+
+    Adam runs with lr 1 and each seed's step is scaled by its own rate ``lr`` (S,)
+    afterwards: Adam's step is linear in lr, so this is Adam with a per-seed rate.
+    """
+    T, S, N, d = obs.shape
+    M = T * N
+    def flat(x):
+        return (x.transpose(0, 1).reshape(S, M, *x.shape[3:]))
+    obs, act, old_logp, adv, ret = flat(obs), flat(act), flat(old_logp), flat(adv), flat(ret)
+    bs = min(settings.batch_size, M)
+    params = list(policy.parameters())
+    for _ in range(settings.n_epochs):
+        perm = torch.argsort(torch.rand((S, M), device=obs.device), dim=1)
+        for start in range(0, M, bs):
+            idx = perm[:, start:start + bs]
+            o, ac, lp0, ad, rt = (_take(x, idx) for x in (obs, act, old_logp, adv, ret))
+            ad = (ad - ad.mean(dim=1, keepdim=True)) / (ad.std(dim=1, keepdim=True) + 1e-8)
+            dist = policy.distribution(o)
+            lp = dist.log_prob(ac).sum(-1)
+            ratio = torch.exp(lp - lp0)
+            pg = -torch.minimum(ad * ratio, ad * torch.clamp(ratio, 1.0 - settings.clip_range,
+                                                            1.0 + settings.clip_range)).mean(1)
+            vf = (rt - policy.value(o)).square().mean(1)
+            ent = -dist.entropy().sum(-1).mean(1)
+            loss = (pg + settings.ent_coef * ent + settings.vf_coef * vf).sum()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            policy.per_seed_grad_clip(settings.max_grad_norm)
+            before = [p.detach().clone() for p in params]
+            opt.step()
+            with torch.no_grad():
+                for p, b in zip(params, before, strict=True):
+                    p.copy_(b + (p - b) * lr.view(-1, *([1] * (p.dim() - 1))))
+            if settings.lr_schedule == "adaptive":
+                with torch.no_grad():  # rsl_rl's rule on the KL of the rollout policy
+                    kl = (lp0 - lp).mean(1)
+                    lr.copy_(torch.where(kl > 2.0 * settings.desired_kl, lr / 1.5,
+                                         torch.where(kl < 0.5 * settings.desired_kl, lr * 1.5,
+                                                     lr)).clamp(1e-5, 1e-2))

@@ -1,0 +1,477 @@
+"""``TorchTetherVecEnv``: thousands of libration envs stepped as torch tensors, on any device.
+
+The batched twin of ``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=B)`` for
+learners that live on an accelerator: the state, the parameters, the observations and
+every per-step quantity stay on ``device`` (a CUDA GPU, or the CPU), so a rollout needs
+no host round trip per step. The step is :mod:`tether_gym_agents.accel.chain`, a
+line-by-line port of the numba step tested equal to it (tests/agents/accel/).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import torch
+
+from tether_gym.envs.batch import MAX_RESET_DRAWS, StartPlan, check_startable, step_config
+from tether_gym.envs.config import EnvConfig
+from tether_gym.envs.layout import INFO_KEYS
+from tether_gym.envs.tether_libration import action_space, observation_space
+from tether_gym.physics.state import PARAMS, STATE
+from tether_gym.tasks.reward import COMPONENTS
+from tether_gym.tasks.termination import KEEP_PREVIOUS, TUMBLE_ANGLE, Failure
+
+from . import chain
+
+__all__ = ["TorchTetherVecEnv", "chain_consts", "resolve_device", "AUTORESET_MODES"]
+
+AUTORESET_MODES = ("next_step", "same_step")
+"""``next_step``: gymnasium's default, as the native vector env; ``same_step``: an ended
+sub-env is reset within the step that ended it, its last observation in
+``info["final_obs"]`` (stable-baselines3's convention, what the GPU learner uses)."""
+
+CUDA_HINT = ("no CUDA device is available to torch (torch.cuda.is_available() is False): "
+             "use device='cpu', or install a CUDA build of torch on a machine with an NVIDIA "
+             "GPU (pip install -e \".[gpu]\" there)")
+
+
+def resolve_device(device) -> torch.device:
+    """``device`` as a torch.device; "cuda" without a CUDA device is a clear error.
+
+    Raises
+    ------
+    ValueError
+        For an unknown device string, or a CUDA device when torch sees none.
+    """
+    if device == "auto":
+        device = "cuda" if torch.cuda.is_available() else "cpu"
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise ValueError(f"device={device!r} is not a torch device ('cpu', 'cuda', 'cuda:0' "
+                         f"or 'auto'): {exc}") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device={device!r}: {CUDA_HINT}")
+    if dev.type not in ("cpu", "cuda"):
+        raise ValueError(f"device={device!r}: only 'cpu' and 'cuda' devices are supported")
+    return dev
+
+
+def chain_consts(config: EnvConfig, device, dtype=torch.float64) -> chain.ChainConsts:
+    """The step's constants (:class:`~.chain.ChainConsts`) of a configuration."""
+    cfg = step_config(config)
+    n = config.n_tethers
+    idx = np.maximum.outer(np.arange(n), np.arange(n))
+    return chain.ChainConsts(
+        n=n, full_gravity=config.chain.gravity.value == "full",
+        max_reel_rate=cfg.max_reel_rate, incremental=cfg.incremental,
+        increment_gain=cfg.increment_gain, h=cfg.substeps.h, substeps=cfg.substeps.number,
+        amplitude=cfg.amplitude, frequency=cfg.frequency, length_min=cfg.length_min,
+        length_max=cfg.length_max, accel_ref=cfg.accel_ref, accel_scale=cfg.accel_scale,
+        with_eccentricity=cfg.with_eccentricity, with_masses=cfg.with_masses,
+        reward=cfg.reward,
+        length_nominal=torch.as_tensor(cfg.length_nominal, dtype=dtype, device=device),
+        mt_index=torch.as_tensor(idx, dtype=torch.int64, device=device))
+
+
+class TorchTetherVecEnv:
+    r"""``num_envs`` libration environments of ``TetherLibration-v1`` as torch tensors.
+
+    ## Description
+
+    The task, physics, reward, termination, observation and ``info`` of
+    ``tether_gym/TetherLibration-v1`` (its docstring is the spec; every keyword argument
+    of ``gym.make`` is accepted here), for a batch of chains held on one torch device.
+    ``device="cuda"`` steps them on the GPU, ``device="cpu"`` on the CPU through the
+    same code. The state is float64 by default (``dtype``), as in the numba env; the
+    observation is float32.
+
+    Equal to the numba env (tests/agents/accel/test_vec_env.py, on CPU): one step from the
+    same state, parameters, command, disturbance and noise gives the same state, reward,
+    failure code and ``info`` to 1e-12 (relative, float64) and the same observation to
+    float32 rounding; whole episodes to 1e-9, with the same failure codes and step
+    counts. The random draws are torch's (``torch.Generator``), not numpy's, so a seed
+    gives other episodes than the numba env's seed: the same distributions, drawn by
+    the same formulas.
+
+    ## Spaces
+
+    ``single_observation_space``, ``single_action_space``: the single env's. ``step``
+    takes a (num_envs, N-1) tensor (or array) of actions in [-1, 1] (clipped).
+
+    ## Step and autoreset
+
+    ``step(actions) -> (obs, reward, terminated, truncated, info)``, all tensors on the
+    device: obs (num_envs, obs_dim) float32, reward (num_envs,) in ``dtype``,
+    terminated/truncated (num_envs,) bool. ``info``: a dict of tensors with every key
+    of the single env's ``info`` (floats (num_envs,), per-tether entries
+    (num_envs, N-1)); ``"failure"`` holds the :class:`~tether_gym.tasks.termination.Failure`
+    codes (int64, 0 while healthy) instead of their labels.
+
+    ``autoreset_mode="next_step"`` (default, gymnasium's and the native vector env's):
+    the step after an episode ended ignores that sub-env's action, resets it and
+    returns its reset observation with reward 0 and both flags False.
+    ``"same_step"``: an ended sub-env is reset in the step that ended it; the step
+    returns its reset observation, and ``info["final_obs"]`` (num_envs, obs_dim) and
+    ``info["final_failure"]`` hold the last observation and the failure code of the
+    episode for the ended rows (stable-baselines3's ``terminal_observation``).
+
+    ## Starting state
+
+    As the single env's, drawn by torch: e, the masses, (theta, theta', l) from
+    uniforms, theta' around theta_d'(nu0), l' from the periodic law (paper Eq. 10);
+    a failed draw is drawn again, up to 1000 times; a row whose every draw failed starts
+    failed and terminates at its first step with reward 0. Reset options are not
+    supported (the native env has them).
+
+    ## Arguments
+
+    ``num_envs`` (>= 1), ``device`` ("cpu", "cuda", "cuda:K" or "auto"), ``dtype``
+    (torch.float64 or torch.float32), ``seed`` (int or None), ``autoreset_mode``,
+    ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
+    False: a NaN action turns its row's state non-finite, which terminates it as
+    ``"nonfinite"``), and every keyword argument of ``gym.make``.
+    """
+
+    def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
+                 autoreset_mode: str = "next_step", check_actions: bool = True, **env_kwargs):
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+            raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
+                            f"{num_envs!r}")
+        if num_envs < 1:
+            raise ValueError(f"num_envs={num_envs!r} must be >= 1")
+        if dtype not in (torch.float64, torch.float32):
+            raise ValueError(f"dtype={dtype!r} must be torch.float64 or torch.float32")
+        if autoreset_mode not in AUTORESET_MODES:
+            raise ValueError(f"autoreset_mode={autoreset_mode!r} must be one of "
+                             f"{AUTORESET_MODES}")
+        if STATE.names != chain.state_names() or STATE.names != (
+                "theta", "dtheta", "length", "dlength"):
+            raise RuntimeError(f"the torch step assumes the state order theta, dtheta, "
+                               f"length, dlength, not {STATE.names}")
+        self.config = EnvConfig.from_kwargs(**env_kwargs)
+        check_startable(self.config)
+        self.device = resolve_device(device)
+        self.dtype = dtype
+        self.num_envs = int(num_envs)
+        self.autoreset_mode = autoreset_mode
+        self.check_actions = bool(check_actions)
+        self.single_observation_space = observation_space(self.config)
+        self.single_action_space = action_space(self.config)
+        self.cc = chain_consts(self.config, self.device, dtype)
+        self._plan = StartPlan.of(self.config)
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
+                                   if seed is None else int(seed))
+        n, num = self.config.n_tethers, self.num_envs
+        self.n = n
+        m = STATE.size(n)
+        def z(*shape):
+            return (torch.zeros(shape, dtype=dtype, device=self.device))
+        def tensor(a):
+            return (torch.as_tensor(np.asarray(a, dtype=float), dtype=dtype,
+                                                    device=self.device))
+        self._par_nominal = tensor(self.config.param_rows(self.config.eccentricity,
+                                                          self.config.masses))
+        self._masses = tensor(self.config.masses)
+        bias = np.zeros(m)
+        bias[STATE.slices(n)["theta"]] = self.config.obs_bias
+        self._bias = tensor(bias)
+        plan = self._plan
+        self._start_base = tensor(plan.start_base)
+        self._start_spread = tensor(plan.start_spread)
+        self._state_low = tensor(plan.state_low)
+        self._state_high = tensor(plan.state_high)
+        # the batch's rows (Rows of the numba env)
+        self.nu = z(num)
+        self.y = z(num, m)
+        self.par = self._par_nominal.expand(num, -1).clone()
+        self.u = z(num, n)                      # normalised command in force [-]
+        self.disturbance = z(num, n)
+        self.noise = self._bias.expand(num, -1).clone()
+        self.tension = z(num, n)
+        self.tension_min = z(num, n)
+        self.derivative = z(num, m)
+        self.reward = z(num)
+        self.components = z(num, len(COMPONENTS))
+        self.failure = torch.zeros(num, dtype=torch.int64, device=self.device)
+        self.steps = torch.zeros(num, dtype=torch.int64, device=self.device)
+        self.nu_end = z(num)
+        self.obs = torch.zeros((num, self.config.obs_dim), dtype=torch.float32,
+                               device=self.device)
+        self._autoreset = torch.zeros(num, dtype=torch.bool, device=self.device)
+        self._start_failed = torch.zeros(num, dtype=torch.bool, device=self.device)
+        self._start_code = torch.zeros(num, dtype=torch.int64, device=self.device)
+        self._was_reset = False
+
+    # ------------------------------------------------------------------ #
+    @property
+    def observation_dim(self) -> int:
+        """Length of one observation."""
+        return int(self.config.obs_dim)
+
+    def seed(self, seed: int) -> None:
+        """Seed the batch's generator."""
+        self.generator.manual_seed(int(seed))
+
+    def reset(self, seed: int | None = None):
+        """Reset every sub-env; returns (obs, info). ``seed`` reseeds the generator."""
+        if seed is not None:
+            self.seed(seed)
+        every = torch.ones(self.num_envs, dtype=torch.bool, device=self.device)
+        self._reset_rows(every)
+        self._autoreset.zero_()
+        self._was_reset = True
+        return self.obs.clone(), self.info()
+
+    # ------------------------------------------------------------------ #
+    def draws(self, count: int) -> dict[str, torch.Tensor]:
+        """One draw of ``count`` starts: e, mass scales, 3n uniforms, 4n normals.
+
+        The same quantities the numba env draws from numpy (``ChainBatch._draw_rows``),
+        by the same formulas (``low + (high - low) u``); absent ones are None.
+        """
+        plan, n, g = self._plan, self.n, self.generator
+        def rand(*shape):
+            return (torch.rand(shape, generator=g, dtype=self.dtype,
+                                                  device=self.device))
+        out: dict[str, Any] = {"ecc": None, "scale": None, "gauss": None}
+        if plan.eccentricity_range is not None:
+            lo, hi = plan.eccentricity_range
+            out["ecc"] = lo + (hi - lo) * rand(count)
+        if plan.mass_range is not None:
+            r = plan.mass_range
+            out["scale"] = (1.0 - r) + ((1.0 + r) - (1.0 - r)) * rand(count, n)
+        out["unit"] = -1.0 + (1.0 - -1.0) * rand(count, 3 * n)
+        if plan.obs_noise > 0.0:
+            out["gauss"] = torch.randn((count, 4 * n), generator=g, dtype=self.dtype,
+                                       device=self.device)
+        return out
+
+    def start(self, draws: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The start of every row of ``draws`` (:meth:`draws`): state, parameters, outputs.
+
+        The numba env's ``_draw_rows`` for the same draws: parameter rows, (theta,
+        theta', l) = base + unit * spread, l' from Eq. 10 at nu0 on the reference, then
+        the reset's evaluation (dy/dnu and T^ with the reels holding their rate), the
+        observation and the command u = clip(l' / max_reel_rate, -1, 1).
+        """
+        plan, cc, n = self._plan, self.cc, self.n
+        unit = draws["unit"]
+        count = unit.shape[0]
+        if plan.randomised:
+            ecc = (draws["ecc"] if draws["ecc"] is not None
+                   else torch.full((count,), plan.eccentricity, dtype=self.dtype,
+                                   device=self.device))
+            masses = self._masses.expand(count, -1)
+            if draws["scale"] is not None:
+                masses = masses * draws["scale"]
+            par = self._param_rows(ecc, masses)
+        else:
+            par = self._par_nominal.expand(count, -1)
+            ecc = par[:, 0]
+        start = self._start_base + unit * self._start_spread
+        length = start[:, 2 * n:3 * n]
+        nu0 = torch.full((count,), plan.nu0, dtype=self.dtype, device=self.device)
+        ref, dref = plan.ref, plan.dref
+        k = 1.0 + ecc * math.cos(plan.nu0)
+        # paper Eq. 10 (tasks.reference.periodic_reel_factors) on the reference
+        num = (4.0 * ecc * math.sin(plan.nu0) * (1.0 + dref)
+               + 2.0 * plan.amplitude * k * plan.frequency**2 * math.sin(plan.frequency
+                                                                          * plan.nu0)
+               - 3.0 * math.sin(2.0 * ref))
+        den = 4.0 * k * (1.0 + dref)
+        dlength = length * num[:, None] / den[:, None]
+        y = torch.cat([start, dlength], dim=1)
+        noise = (self._bias.expand(count, -1) if draws["gauss"] is None
+                 else plan.obs_noise * draws["gauss"] + self._bias)
+        _, res = chain.advance(nu0, y, dlength, torch.zeros_like(length), par, cc, 0)
+        u = torch.clamp(dlength / cc.max_reel_rate, -1.0, 1.0)
+        ok = ((y > self._state_low) & (y < self._state_high)).all(dim=1)
+        ok &= ((res.tension > 0.0) & (res.tension < math.inf)).all(dim=1)
+        return {"nu": nu0, "y": y, "par": par, "noise": noise, "u": u,
+                "nu_end": nu0 + plan.episode_length, "tension": res.tension,
+                "tension_min": res.tension_min, "derivative": res.derivative,
+                "obs": chain.observation(nu0, y, noise, par, u, cc), "ok": ok}
+
+    def _param_rows(self, ecc: torch.Tensor, masses: torch.Tensor) -> torch.Tensor:
+        """Parameter rows for e (B,) and masses (B, n) (``pack_params`` of ``tail_masses``)."""
+        total = chain._sum_along(masses)
+        tail = chain._cumsum(masses / total[:, None], reverse=True)
+        par = self._par_nominal.expand(ecc.shape[0], -1).clone()
+        sl = PARAMS.slices(self.n)
+        par[:, sl["eccentricity"]] = ecc[:, None]
+        par[:, sl["tail_mass"]] = tail
+        return par
+
+    def _reset_rows(self, mask: torch.Tensor) -> None:
+        """Draw and start the rows of ``mask``, drawing failed starts again (<= 1000 times)."""
+        pending = mask
+        for _ in range(MAX_RESET_DRAWS):
+            s = self.start(self.draws(self.num_envs))
+            self._write_start(pending, s)  # a row whose every draw fails keeps its last
+            pending = pending & ~s["ok"]
+            if not bool(pending.any()):
+                break
+        self._start_failed = torch.where(mask, pending, self._start_failed)
+        if bool(pending.any()):
+            self._start_code = torch.where(pending, self._start_failure(), self._start_code)
+
+    def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
+        """Copy the start ``s`` into the rows of the mask ``rows``."""
+        col = rows[:, None]
+        self.nu = torch.where(rows, s["nu"], self.nu)
+        self.nu_end = torch.where(rows, s["nu_end"], self.nu_end)
+        self.y = torch.where(col, s["y"], self.y)
+        self.par = torch.where(col, s["par"], self.par)
+        self.noise = torch.where(col, s["noise"], self.noise)
+        self.u = torch.where(col, s["u"], self.u)
+        self.tension = torch.where(col, s["tension"], self.tension)
+        self.tension_min = torch.where(col, s["tension_min"], self.tension_min)
+        self.derivative = torch.where(col, s["derivative"], self.derivative)
+        self.obs = torch.where(col, s["obs"], self.obs)
+        zero = torch.zeros_like(self.reward)
+        self.reward = torch.where(rows, zero, self.reward)
+        self.components = torch.where(col, torch.zeros_like(self.components), self.components)
+        self.failure = torch.where(rows, torch.zeros_like(self.failure), self.failure)
+        self.steps = torch.where(rows, torch.zeros_like(self.steps), self.steps)
+
+    def _start_failure(self) -> torch.Tensor:
+        """Why each row's start is failed (``ChainBatch._start_code``'s order)."""
+        n = self.n
+        finite = torch.isfinite(self.y).all(dim=1) & torch.isfinite(self.tension).all(dim=1)
+        code = torch.full_like(self.failure, int(Failure.LENGTH))
+        tumble = (self.y[:, :n].abs() >= TUMBLE_ANGLE).any(dim=1)
+        code = torch.where(tumble, torch.full_like(code, int(Failure.TUMBLE)), code)
+        slack = (self.tension <= 0.0).any(dim=1)
+        code = torch.where(slack, torch.full_like(code, int(Failure.SLACK)), code)
+        return torch.where(finite, code, torch.full_like(code, int(Failure.NONFINITE)))
+
+    # ------------------------------------------------------------------ #
+    def step(self, actions):
+        """One control step of every sub-env (see the class docstring for autoreset)."""
+        if not self._was_reset:
+            raise RuntimeError("call reset() before step()")
+        a = torch.as_tensor(actions, device=self.device)
+        if a.dtype == torch.bool or a.is_complex():
+            raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
+        a = a.to(self.dtype)
+        if a.shape != (self.num_envs, self.n):
+            raise ValueError(f"actions must have shape ({self.num_envs}, {self.n}) "
+                             f"(num_envs, N-1), got {tuple(a.shape)}")
+        done = self._autoreset
+        if self.check_actions:  # every row, as the native vector env (ended rows too)
+            bad = ~torch.isfinite(a).all(dim=1)
+            if bool(bad.any()):
+                rows = torch.nonzero(bad).flatten().tolist()
+                raise ValueError(f"actions must be finite (no NaN or inf); rows {rows} are not")
+        self._advance(a, ~done)
+        if self.autoreset_mode == "same_step":
+            terminated = self.failure != 0
+            truncated = self.steps_truncated() & ~terminated
+            reward = self.reward.clone()  # the last step's, before the reset zeroes it
+            final_obs = self.obs.clone()
+            final_failure = self.failure.clone()
+            ended = terminated | truncated
+            if bool(ended.any()):
+                self._reset_rows(ended)
+            info = self.info()
+            info["final_obs"] = final_obs
+            info["final_failure"] = final_failure
+            return self.obs.clone(), reward, terminated, truncated, info
+        if bool(done.any()):
+            self._reset_rows(done)
+        terminated = self.failure != 0
+        truncated = self.steps_truncated() & ~terminated
+        self._autoreset = terminated | truncated
+        return self.obs.clone(), self.reward.clone(), terminated, truncated, self.info()
+
+    def steps_truncated(self) -> torch.Tensor:
+        """Rows whose episode has reached its length in true anomaly (and that stepped)."""
+        return (self.nu >= self.nu_end - 1e-9) & (self.steps > 0)
+
+    def _advance(self, a: torch.Tensor, rows: torch.Tensor, draw: bool = True) -> None:
+        """Step the rows of the mask ``rows`` (``step_kernel.step_rows`` with reset False).
+
+        ``draw`` False keeps the disturbance and noise rows as they are (tests set them).
+        """
+        cc, n, cfg = self.cc, self.n, self.config
+        g = self.generator
+        if draw and cfg.disturbance > 0.0:
+            d = cfg.disturbance
+            unit = torch.rand(self.disturbance.shape, generator=g, dtype=self.dtype,
+                              device=self.device)
+            self.disturbance = torch.where(rows[:, None], -d + (d - -d) * unit,
+                                           self.disturbance)
+        if draw and cfg.obs_noise > 0.0:
+            gauss = torch.randn(self.noise.shape, generator=g, dtype=self.dtype,
+                                device=self.device)
+            self.noise = torch.where(rows[:, None], cfg.obs_noise * gauss + self._bias,
+                                     self.noise)
+        ended_start = rows & self._start_failed
+        live = rows & ~self._start_failed
+        clipped = torch.clamp(a, -1.0, 1.0)
+        u = torch.clamp(self.u + cc.increment_gain * clipped, -1.0, 1.0) if cc.incremental \
+            else clipped
+        nu, res = chain.advance(self.nu, self.y, u * cc.max_reel_rate, self.disturbance,
+                                self.par, cc, cc.substeps)
+        code = chain.failure_code(res.y, res.tension_min, cc)
+        keep = (code == KEEP_PREVIOUS[0]) | (code == KEEP_PREVIOUS[1])
+        kc = keep[:, None]
+        y = torch.where(kc, self.y, res.y)
+        def finite_or_zero(x):
+            return (torch.where(kc & ~torch.isfinite(x), torch.zeros_like(x), x))
+        tension = finite_or_zero(res.tension)
+        tension_min = finite_or_zero(res.tension_min)
+        derivative = finite_or_zero(res.derivative)
+        sn = torch.sin(nu)[:, None]
+        e = self.par[:, :1]
+        k = 1.0 + e * torch.cos(nu)[:, None]
+        accel = chain.reel_accel(k, sn, e, y[:, 3 * n:], derivative[:, 3 * n:]) / cc.accel_ref
+        ref = cc.amplitude * torch.sin(cc.frequency * nu)
+        dref = cc.amplitude * cc.frequency * torch.cos(cc.frequency * nu)
+        reward, comps = chain.reward(y, u, accel, tension_min, ref, dref, cc)
+        reward = torch.where(keep, torch.zeros_like(reward), reward)
+        comps = torch.where(kc, torch.zeros_like(comps), comps)
+        obs = chain.observation(nu, y, self.noise, self.par, u, cc)
+        lc = live[:, None]
+        self.nu = torch.where(live, nu, self.nu)
+        self.y = torch.where(lc, y, self.y)
+        self.u = torch.where(lc, u, self.u)
+        self.tension = torch.where(lc, tension, self.tension)
+        self.tension_min = torch.where(lc, tension_min, self.tension_min)
+        self.derivative = torch.where(lc, derivative, self.derivative)
+        self.reward = torch.where(live, reward, self.reward)
+        self.components = torch.where(lc, comps, self.components)
+        self.failure = torch.where(live, code, self.failure)
+        self.failure = torch.where(ended_start, self._start_code, self.failure)
+        self.obs = torch.where(lc, obs, self.obs)
+        self.steps = self.steps + rows.to(torch.int64)
+        self._start_failed = self._start_failed & ~rows
+
+    # ------------------------------------------------------------------ #
+    def info(self) -> dict[str, torch.Tensor]:
+        """The ``info`` entries of every sub-env (INFO_KEYS; ``failure`` as codes)."""
+        n, cc = self.n, self.cc
+        y = self.y
+        reel, ddl = chain.info_vectors(self.nu, y, self.par,
+                                       chain.StepResult(y, self.tension_min, self.derivative,
+                                                        self.tension), cc)
+        ref = cc.amplitude * torch.sin(cc.frequency * self.nu)
+        dref = cc.amplitude * cc.frequency * torch.cos(cc.frequency * self.nu)
+        values = {"nu": self.nu, "theta": y[:, :n], "dtheta": y[:, n:2 * n],
+                  "length": y[:, 2 * n:3 * n], "dlength": y[:, 3 * n:], "ddlength": ddl,
+                  "tension": self.tension, "tension_min": self.tension_min,
+                  "theta_ref": ref, "dtheta_ref": dref, "reel_accel": reel,
+                  "command": self.u, "eccentricity": self.par[:, 0],
+                  # a start whose every draw failed reports why from its reset on
+                  "failure": torch.where(self._start_failed, self._start_code, self.failure)}
+        for c, name in enumerate(COMPONENTS):
+            values[name] = self.components[:, c]
+        return {key: values[key] for key in INFO_KEYS}
+
+    def __repr__(self) -> str:
+        return (f"TorchTetherVecEnv(num_envs={self.num_envs}, n_bodies={self.config.n_bodies}, "
+                f"device={str(self.device)!r}, dtype={self.dtype})")

@@ -1,0 +1,175 @@
+"""Env throughput of the torch path (TorchTetherVecEnv) beside the numba vector env.
+
+    python bench/gpu_throughput.py --device cuda --envs 4096 65536 262144 1048576 --out F.json
+    python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba      # the CPU ratio
+
+For each batch size: env steps per second of ``TorchTetherVecEnv.step`` (N = 3,
+float64, the ppo training distribution's env kwargs, zero actions, autoreset on), after
+warm-up steps, timed over whole steps with the device synchronised. ``--numba`` times
+the native vector env (``gym.make_vec``, one thread) at the same sizes in the same run;
+``--numba-cuda`` probes whether numba-cuda compiles the existing numba kernel
+(``tether_gym.physics.kernels.advance_one``) into a CUDA kernel, and times it when it
+does. Prints one line per measurement and writes them as JSON.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+import traceback
+
+import numpy as np
+
+ENV_KWARGS = {"increment_gain": 0.5, "initial_theta": [0.0, 0.0], "init_theta_range": 0.15,
+              "init_dtheta_range": 0.1, "eccentricity_range": [0.0, 0.35], "mass_range": 0.25,
+              "observe_params": False, "disturbance": 0.1, "obs_noise": 0.001}
+
+
+def _sync(device):
+    import torch
+
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def torch_rate(num, device, steps, warmup=3, mode="same_step"):
+    import torch
+
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    env = TorchTetherVecEnv(num, device=device, seed=0, autoreset_mode=mode,
+                            check_actions=False, **ENV_KWARGS)
+    env.reset()
+    a = torch.zeros((num, env.n), dtype=torch.float64, device=env.device)
+    for _ in range(warmup):
+        env.step(a)
+    _sync(env.device)
+    t = time.perf_counter()
+    for _ in range(steps):
+        env.step(a)
+    _sync(env.device)
+    dt = (time.perf_counter() - t) / steps
+    return {"what": "torch", "device": str(env.device), "envs": num, "ms_per_step": dt * 1e3,
+            "env_steps_per_s": num / dt}
+
+
+def numba_rate(num, steps, warmup=3):
+    import gymnasium as gym
+
+    import tether_gym  # noqa: F401
+
+    venv = gym.make_vec("tether_gym/TetherLibration-v1", num_envs=num,
+                        vectorization_mode="vector_entry_point", parallel=False, **ENV_KWARGS)
+    venv.reset(seed=0)
+    a = np.zeros((num, 2))
+    for _ in range(warmup):
+        venv.step(a)
+    t = time.perf_counter()
+    for _ in range(steps):
+        venv.step(a)
+    dt = (time.perf_counter() - t) / steps
+    return {"what": "numba", "device": "cpu (1 thread)", "envs": num, "ms_per_step": dt * 1e3,
+            "env_steps_per_s": num / dt}
+
+
+def numba_cuda_probe(num):
+    """Compile a CUDA kernel that calls the existing numba step of one chain per thread."""
+    out = {"what": "numba-cuda probe", "envs": num}
+    try:
+        from numba import cuda
+
+        from tether_gym.envs.config import EnvConfig
+        from tether_gym.physics import kernels
+        from tether_gym.physics.kernels import Scratch, StepInputs, StepOutputs, Substeps
+
+        out["numba_cuda"] = getattr(cuda, "__version__", "?")
+        config = EnvConfig.from_kwargs()
+        n = config.n_tethers
+        par = np.tile(config.param_rows(config.eccentricity, config.masses), (num, 1))
+        y = np.tile(np.array([0.1, 0.0, 0.2, 0.2, 0.5, 0.5, 0.0, 0.0]), (num, 1))
+        nu = np.zeros(num)
+        cmd = np.zeros((num, n))
+        dist = np.zeros((num, n))
+        advance = kernels.advance_one
+
+        @cuda.jit
+        def step(nu, y, cmd, dist, par, S_, R, V, ten, k1, k2, k3, k4, tmp, orb, tmin, der,
+                 tout):
+            b = cuda.grid(1)
+            if b < y.shape[0]:
+                work = Scratch(S_[b], R[b], V[b], ten[b], k1[b], k2[b], k3[b], k4[b], tmp[b],
+                               orb[b])
+                nu[b] = advance(nu[b], y[b], StepInputs(cmd[b], dist[b]), par[b],
+                                Substeps(0.0125, 2), work, StepOutputs(tmin[b], der[b], tout[b]))
+
+        m = 4 * n
+        arrays = [nu, y, cmd, dist, par, np.zeros((num, n, n)), np.zeros((num, n, 1)),
+                  np.zeros((num, 7, n)), np.zeros((num, n))] + [np.zeros((num, m))] * 5 + [
+            np.full((num, 3), np.nan), np.zeros((num, n)), np.zeros((num, m)), np.zeros((num, n))]
+        dev = [cuda.to_device(np.ascontiguousarray(x)) for x in arrays]
+        threads = 128
+        blocks = (num + threads - 1) // threads
+        t = time.perf_counter()
+        step[blocks, threads](*dev)
+        cuda.synchronize()
+        out["compile_and_first_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        reps = 20
+        for _ in range(reps):
+            step[blocks, threads](*dev)
+        cuda.synchronize()
+        dt = (time.perf_counter() - t) / reps
+        out.update(ok=True, ms_per_physics_step=dt * 1e3, chain_steps_per_s=num / dt)
+    except Exception as exc:  # noqa: BLE001 - the probe reports what failed
+        out.update(ok=False, error=f"{type(exc).__name__}: {str(exc)[:600]}",
+                   where=traceback.format_exc(limit=3)[-800:])
+    return out
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--envs", type=int, nargs="+", default=[256, 4096])
+    p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--numba", action="store_true")
+    p.add_argument("--numba-cuda", action="store_true")
+    p.add_argument("--out", default=None)
+    args = p.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "1")))
+    from tether_gym_agents.accel.vec_env import resolve_device
+
+    device = resolve_device(args.device)
+    rows = []
+    meta = {"python": sys.version.split()[0], "torch": torch.__version__,
+            "machine": platform.processor() or platform.machine(),
+            "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None}
+    print(json.dumps(meta))
+    for num in args.envs:
+        row = torch_rate(num, device, args.steps)
+        rows.append(row)
+        print(json.dumps(row), flush=True)
+        if args.numba:
+            row = numba_rate(num, args.steps)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    if args.numba_cuda:
+        for num in args.envs:
+            row = numba_cuda_probe(num)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+            if not row.get("ok"):
+                break
+    if args.out:
+        with open(args.out, "w") as fh:
+            json.dump({"meta": meta, "rows": rows}, fh, indent=1)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,63 @@
+"""``python train.py gpu`` in-process with a tiny budget on CPU, scored by ``evaluate.py``."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("stable_baselines3")
+
+from tether_gym_agents.cli.evaluate import main as evaluate_main  # noqa: E402
+from tether_gym_agents.cli.train import main as train_main  # noqa: E402
+from tether_gym_agents.files.safe_format import load_agent  # noqa: E402
+
+
+def test_train_gpu_on_cpu_writes_runs_that_evaluate_scores(tmp_path, capsys):
+    out = tmp_path / "gpu"
+    code = train_main(["gpu", "--seeds", "2", "--n-envs", "4", "--timesteps", "256",
+                       "--device", "cpu", "--out", str(out)])
+    assert code == 0
+    for k in (0, 1):
+        run = out / f"seed_{k}"
+        policy, meta = load_agent(run)
+        assert meta["algo"] == "ppo" and meta["training"]["seed"] == k
+        assert meta["obs_normalization"] is not None
+        info = json.loads((run / "train_info.json").read_text())
+        assert info["num_timesteps"] >= 256 and info["seeds_in_process"] == 2
+        assert (run / "checkpoints").is_dir() and any((run / "checkpoints").iterdir())
+    # the two seeds are different networks (own initialisation and data)
+    w0 = load_agent(out / "seed_0")[0].state_dict()["action_net.weight"]
+    w1 = load_agent(out / "seed_1")[0].state_dict()["action_net.weight"]
+    assert not (w0 == w1).all()
+    assert evaluate_main([str(out), "--seeds", "1", "--out", str(tmp_path / "eval"),
+                          "--no-plots"]) == 0
+    res = json.loads((tmp_path / "eval" / "results.json").read_text())
+    assert res
+
+
+@pytest.mark.parametrize("text, message", [
+    ("n_envs: 0\n", "n_envs=0 must be an integer in"),
+    ("n_epochs: 1000000000\n", "n_epochs=1000000000 must be an integer in"),
+    ("learning_rate: .nan\n", "learning_rate=nan"),
+    ("bogus: 1\n", "unknown key"),
+    ("a: &x [1]\nb: *x\n", "anchors"),
+    ("[", "not readable YAML"),
+])
+def test_bad_config_is_one_line_naming_the_file(tmp_path, capsys, text, message):
+    cfg = tmp_path / "bad.yml"
+    cfg.write_text(text)
+    code = train_main(["gpu", "--config", str(cfg), "--device", "cpu",
+                       "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and str(cfg) in err
+
+
+def test_cuda_without_a_gpu_is_a_clear_error(tmp_path, capsys):
+    import torch
+
+    if torch.cuda.is_available():
+        pytest.skip("this machine has a GPU")
+    code = train_main(["gpu", "--device", "cuda", "--out", str(tmp_path / "o")])
+    assert code == 2 and "pip install" in capsys.readouterr().err

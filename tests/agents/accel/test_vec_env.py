@@ -1,0 +1,141 @@
+"""TorchTetherVecEnv against the native vector env: episodes, starts, autoreset, errors."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+import tether_gym  # noqa: E402,F401
+from tether_gym.envs.layout import OBSERVATION  # noqa: E402
+from tether_gym_agents.accel.vec_env import TorchTetherVecEnv  # noqa: E402
+
+B = 48
+TRAINING = {"increment_gain": 0.5, "initial_theta": [0.0, 0.0], "init_theta_range": 0.15,
+            "init_dtheta_range": 0.1, "eccentricity_range": [0.0, 0.35], "mass_range": 0.25,
+            "observe_params": False}
+
+
+def _native(kwargs, seed=3):
+    venv = gym.make_vec("tether_gym/TetherLibration-v1", num_envs=B,
+                        vectorization_mode="vector_entry_point", parallel=False, **kwargs)
+    obs, _ = venv.reset(seed=seed)
+    return venv, obs
+
+
+def _copy_rows(venv, env):
+    """The native env's rows (state, parameters, command, noise, outputs) into the torch env."""
+    r = venv.unwrapped._batch.rows
+    def t(x):
+        return (torch.as_tensor(np.array(x), dtype=torch.float64))
+    env.nu, env.y, env.par, env.u, env.noise = t(r.nu), t(r.y), t(r.par), t(r.command), t(r.noise)
+    env.nu_end, env.tension, env.tension_min = t(r.nu_end), t(r.tension), t(r.tension_min)
+    env.derivative = t(r.derivative)
+    env.obs = torch.as_tensor(r.obs.copy())
+
+
+@pytest.mark.parametrize("n_bodies", [3, 5])
+def test_whole_episodes_equal_numba(n_bodies):
+    """754-step episodes from the same starts, driven by the same actions: 1e-9, same ends."""
+    kwargs = {**TRAINING, "n_bodies": n_bodies, "initial_theta": [0.0] * (n_bodies - 1)}
+    venv, obs = _native(kwargs)
+    env = TorchTetherVecEnv(B, device="cpu", seed=0, **kwargs)
+    env.reset()
+    _copy_rows(venv, env)
+    n = n_bodies - 1
+    # from holding the reels (the first third) to swinging them hard enough to fail
+    amplitude = np.clip(np.linspace(-0.3, 0.6, B), 0.0, None)[:, None]
+    alive = np.ones(B, dtype=bool)
+    ended_at = np.full(B, -1)
+    codes = np.zeros(B, dtype=int)
+    max_dev = 0.0
+    for step in range(1, 800):
+        err = obs[:, OBSERVATION.slices(n)["error"]]
+        action = amplitude * np.sin(0.05 * step + 10.0 * err)
+        obs, rew, term, trunc, info = venv.step(action)
+        tobs, trew, tterm, ttrunc, tinfo = env.step(torch.as_tensor(action))
+        y = venv.unwrapped._batch.rows.y
+        live = alive.copy()
+        dev = np.abs(env.y.numpy()[live] - y[live]) / np.maximum(np.abs(y[live]), 1e-3)
+        max_dev = max(max_dev, float(dev.max(initial=0.0)))
+        np.testing.assert_allclose(trew.numpy()[live], rew[live], rtol=1e-9, atol=1e-12)
+        np.testing.assert_array_equal(tterm.numpy()[live], term[live])
+        np.testing.assert_array_equal(ttrunc.numpy()[live], trunc[live])
+        done = live & (term | trunc)
+        ended_at[done] = step
+        codes[done] = tinfo["failure"].numpy()[done]
+        alive &= ~(term | trunc)
+        if not alive.any():
+            break
+    assert max_dev < 1e-9, max_dev
+    assert not alive.any()
+    assert (ended_at == 754).sum() >= 2 and (ended_at < 754).sum() >= 2  # both kinds of end
+    assert set(codes[ended_at < 754]) - {0}
+
+
+def test_start_from_the_same_draws_equals_numba():
+    """The reset of a row from numpy's draws (same order) is the native env's reset."""
+    kwargs = {**TRAINING, "obs_noise": 1e-3}
+    venv, obs = _native(kwargs, seed=11)
+    env = TorchTetherVecEnv(B, device="cpu", seed=0, **kwargs)
+    n = 2
+    draws = {"ecc": [], "scale": [], "unit": [], "gauss": []}
+    for i in range(B):  # the vector env seeds sub-env i with seed + i
+        rng = np.random.default_rng(11 + i)
+        draws["ecc"].append(rng.uniform(0.0, 0.35))
+        draws["scale"].append(rng.uniform(0.75, 1.25, n))
+        draws["unit"].append(rng.uniform(-1.0, 1.0, 3 * n))
+        draws["gauss"].append(rng.standard_normal(4 * n))
+    s = env.start({k: torch.as_tensor(np.array(v), dtype=torch.float64)
+                   for k, v in draws.items()})
+    r = venv.unwrapped._batch.rows
+    assert s["ok"].all()
+    for key, want in (("y", r.y), ("par", r.par), ("noise", r.noise), ("u", r.command),
+                      ("tension", r.tension), ("derivative", r.derivative)):
+        np.testing.assert_allclose(s[key].numpy(), want, rtol=1e-12, atol=1e-15, err_msg=key)
+    np.testing.assert_allclose(s["obs"].numpy(), obs, rtol=2.0**-23, atol=1e-12)
+
+
+def test_autoreset_next_step_and_same_step():
+    kwargs = {**TRAINING}
+    for mode in ("next_step", "same_step"):
+        env = TorchTetherVecEnv(8, device="cpu", seed=5, autoreset_mode=mode, **kwargs)
+        env.reset()
+        wild = torch.ones((8, 2), dtype=torch.float64)  # reel out flat out: ends early
+        for _ in range(2000):
+            obs, rew, term, trunc, info = env.step(wild)
+            if term.any():
+                break
+        assert term.any() and not trunc[term].any()
+        row = int(torch.nonzero(term)[0])
+        if mode == "same_step":
+            assert info["final_failure"][row] != 0
+            assert env.steps[row] == 0  # already reset, its last observation kept apart
+            assert not torch.equal(info["final_obs"][row], obs[row])
+        else:
+            assert info["failure"][row] != 0
+            obs2, rew2, term2, trunc2, _ = env.step(wild)
+            assert rew2[row] == 0.0 and not term2[row] and not trunc2[row]
+            assert env.steps[row] == 0
+
+
+def test_bad_input_is_refused():
+    env = TorchTetherVecEnv(4, device="cpu")
+    with pytest.raises(RuntimeError, match="reset"):
+        env.step(torch.zeros(4, 2))
+    env.reset(seed=1)
+    with pytest.raises(ValueError, match="shape"):
+        env.step(torch.zeros(4, 3))
+    with pytest.raises(ValueError, match="finite"):
+        env.step(torch.full((4, 2), float("nan")))
+    with pytest.raises(TypeError, match="real"):
+        env.step(torch.zeros((4, 2), dtype=torch.bool))
+    with pytest.raises(ValueError, match="num_envs"):
+        TorchTetherVecEnv(0)
+    with pytest.raises(ValueError, match="unknown argument"):
+        TorchTetherVecEnv(2, eccentricty=0.1)
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="pip install"):
+            TorchTetherVecEnv(2, device="cuda")
