@@ -5,7 +5,7 @@ with :func:`tether_gym.physics.kernels.advance_one`) to whole-batch torch operat
 so that thousands of chains step at once on a CUDA device (or on the CPU, through the
 same code). It holds no equation of its own: every line mirrors a line of the numba
 kernels, which carry the derivation (paper Sec. 2, Eqs. 4-6 and 20; docs/model.md),
-in the same order of operations, and tests/agents/accel/test_chain.py checks every
+in the same order of operations, and tests/agents/accel/test_accel_chain.py checks every
 output against the numba step to 1e-12 (relative, float64).
 
 Notation as in :mod:`tether_gym.physics.kernels`: tether j = 0..n-1 at angle th_j

@@ -88,7 +88,7 @@ class TorchTetherVecEnv:
     same code. The state is float64 by default (``dtype``), as in the numba env; the
     observation is float32.
 
-    Equal to the numba env (tests/agents/accel/test_vec_env.py, on CPU): one step from the
+    Equal to the numba env (tests/agents/accel/test_accel_vec_env.py, on CPU): one step from the
     same state, parameters, command, disturbance and noise gives the same state, reward,
     failure code and ``info`` to 1e-12 (relative, float64) and the same observation to
     float32 rounding; whole episodes to 1e-9, with the same failure codes and step
