@@ -145,6 +145,119 @@ def test_missing_casadi_error_in_process(monkeypatch):
         make_policy("mpc", _env())
 
 
-def test_unknown_weight_is_rejected():
-    with pytest.raises(ValueError, match="unknown weights"):
-        ModelPredictiveController.for_env(_env(), weights={"efort": 1.0})
+# ---------------------------------------------------------------------------------------
+# arguments: each refused with a clear error before any CasADi function is built
+
+
+@pytest.fixture
+def no_build(monkeypatch):
+    """Fail loudly if a test's controller gets as far as building its solver functions."""
+    from tether_gym_agents.baselines import mpc as mpc_module
+
+    def refuse(*args):
+        raise AssertionError("built the solver functions before refusing the argument")
+
+    monkeypatch.setattr(mpc_module, "_solver_functions", refuse)
+
+
+@pytest.mark.parametrize(("kwargs", "error", "match"), [
+    (dict(blocks=5), TypeError, r"blocks must be a sequence of ints >= 1.*got int 5"),
+    (dict(blocks="abc"), TypeError, r"blocks must be a sequence.*got str 'abc'"),
+    (dict(blocks=()), ValueError, r"blocks holds 0 moves; valid: 1 \.\.\. 40"),
+    (dict(blocks=(1,) * 300), ValueError, r"blocks holds 300 moves; valid: 1 \.\.\. 40"),
+    (dict(blocks=(100, 30)), ValueError, r"plans 130 control steps; valid: at most 120"),
+    (dict(blocks=(1, 0)), ValueError, r"blocks\[1\]=0 is outside the valid range \[1, 120\]"),
+    (dict(blocks=(1, 2.0)), TypeError, r"blocks\[1\] must be an int in \[1, 120\], got float"),
+    (dict(iterations=0), ValueError, r"iterations=0 is outside the valid range \[1, 20\]"),
+    (dict(iterations=10**9), ValueError, r"iterations=1000000000 is outside"),
+    (dict(iterations=True), TypeError, r"iterations must be an int in \[1, 20\], got bool"),
+    (dict(weights="abc"), TypeError, r"weights must be a dict with keys from .*got str 'abc'"),
+    (dict(weights={"efort": 1.0}), ValueError, r"unknown weights \['efort'\]; valid"),
+    (dict(weights={"rate": -1.0}), ValueError, r"weights\[.rate.\]=-1.0 is outside"),
+    (dict(weights={"slack": 0.0}), ValueError, r"weights\['slack'\]=0.0 is outside the valid "
+                                               r"range \(0.0, 1000000000000.0\]"),
+    (dict(weights={"move": float("nan")}), ValueError, r"weights\['move'\]=nan must be finite"),
+    (dict(weights={"tail": "x"}), TypeError, r"weights\['tail'\] must be a real number"),
+    (dict(margins=[1]), TypeError, r"margins must be a dict"),
+    (dict(margins={"libration": 10.0}), ValueError,
+     r"margins\['libration'\]=10.0 is outside the valid range \[0.0, 1.5707963267948966\)"),
+    (dict(margins={"length": -0.1}), ValueError, r"margins\['length'\]=-0.1 is outside"),
+    (dict(margins={"tension_floor": 2.0}), ValueError,
+     r"margins\['tension_floor'\]=2.0 is outside the valid range \[0.0, 0.5\]"),
+])
+def test_arguments_are_checked_before_any_work(kwargs, error, match, no_build):
+    with pytest.raises(error, match=match):
+        ModelPredictiveController.for_env(_env(), **kwargs)
+
+
+@pytest.mark.parametrize(("nominal", "error", "match"), [
+    ({"masses": (0.0, 2.0)}, ValueError, r"nominal masses for 2 tethers: .*must all be > 0"),
+    ({"masses": (-1.0, 2.0)}, ValueError, r"must all be > 0"),
+    ({"masses": (1.0, 2.0, 3.0)}, ValueError, r"nominal masses for 2 tethers: .*must have 2 "
+                                              r"entries, got 3"),
+    ({"masses": "ab"}, TypeError, r"nominal masses for 2 tethers"),
+    ({"eccentricity": 1.5}, ValueError,
+     r"nominal eccentricity=1.5 is outside the valid range \[0.0, 1.0\)"),
+    ({"eccentricity": -0.1}, ValueError, r"nominal eccentricity=-0.1 is outside"),
+    ({"reel_time_constant": 0.0}, ValueError, r"nominal reel_time_constant=0.0 is outside "
+                                              r"the valid range \(0.0, inf\]"),
+    ({"accel_limit": float("nan")}, ValueError, r"nominal accel_limit=nan must be finite"),
+    ({"mass": (1.0, 2.0)}, ValueError, r"unknown nominal \['mass'\]; valid"),
+    ("abc", TypeError, r"nominal must be a dict"),
+])
+def test_nominal_model_is_checked_before_any_work(nominal, error, match, no_build):
+    with pytest.raises(error, match=match):
+        ModelPredictiveController.for_env(_env(), nominal)
+
+
+def test_a_bad_nominal_model_in_a_suite_file_is_refused_before_any_episode(tmp_path, no_build):
+    """Through the user's command: a YAML suite whose nominal masses are <= 0."""
+    from tether_gym_agents.evaluation.benchmark import evaluate
+
+    suite = tmp_path / "bad.yml"
+    suite.write_text("scenarios:\n  - name: bad\n    env_kwargs: {}\n"
+                     "    nominal: {masses: [0.0, 2.0]}\n")
+    with pytest.raises(ValueError, match=r"policy 'mpc' on scenario 'bad': nominal masses"):
+        evaluate(["mpc"], suite=str(suite), n_seeds=1, out=None, log=None)
+
+
+def test_a_hand_built_step_is_checked(no_build):
+    from dataclasses import replace
+
+    from tether_gym.physics import PARAMS
+    from tether_gym_agents.baselines.prediction import NominalStep
+    from tether_gym_agents.common.obs import ObservationLayout
+
+    env = _env()
+    step = NominalStep.for_env(env)
+    params = step.params.copy()
+    params[PARAMS.slices(2)["eccentricity"]] = 1.5
+    with pytest.raises(ValueError, match=r"the nominal model's eccentricity=1.5 is outside"):
+        ModelPredictiveController(replace(step, params=params), ObservationLayout.from_env(env))
+
+
+@pytest.mark.parametrize(("make", "match"), [
+    (lambda: ModelPredictiveController.for_env(_env(), {"eccentricity": 0.9}),
+     r"nominal eccentricity 0.9 is beyond the 0.4 it was checked on"),
+    (lambda: ModelPredictiveController.for_env(_env(n_bodies=6)),
+     r"5 tethers \(N = 6 bodies\) is beyond the 2 it was checked on"),
+])
+def test_beyond_its_reach_it_warns(make, match, no_build):
+    with pytest.warns(UserWarning, match=match), pytest.raises(AssertionError, match="built"):
+        make()
+
+
+def test_non_finite_observations_are_refused_before_planning():
+    env = _env()
+    mpc = ModelPredictiveController.for_env(env)
+    obs, _ = env.reset(seed=0)
+    bad = np.array(obs, dtype=np.float64)
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match=r"observation row 0 has non-finite entries at "
+                                         r"indices \[3\] \(\[nan\]\)"):
+        mpc.predict(bad)
+    assert mpc.solve_times == []
+    batch = np.stack([obs, obs]).astype(np.float64)
+    batch[1, 0] = np.inf
+    with pytest.raises(ValueError, match=r"row 1 has non-finite entries at indices \[0\]"):
+        mpc.predict(batch)
