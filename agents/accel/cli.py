@@ -1,6 +1,6 @@
 """``python train.py gpu``: PPO with the env and the learner on one torch device.
 
-    python train.py gpu --config configs/ppo_gpu.yml --seeds 10 --out runs/ppo_gpu
+    python train.py gpu --config configs/gpu_ppo.yml --seeds 10 --out runs/ppo_gpu
 
 trains seeds --seed .. --seed+N-1 in one process (all at once, each with its own envs,
 statistics and weights) and writes ``OUT/seed_K/`` run folders that ``python
@@ -21,7 +21,7 @@ from pathlib import Path
 
 __all__ = ["main", "read_config", "DEFAULT_CONFIG"]
 
-DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "ppo_gpu.yml"
+DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "gpu_ppo.yml"
 MAX_CONFIG_BYTES = 1 << 20
 """A config file larger than this [bytes] is refused before it is parsed."""
 MAX_SEEDS = 64
@@ -57,11 +57,12 @@ _BOUNDS = {  # key: (low, high, integer)
 
 
 def read_config(path: Path) -> tuple:
-    """(PPOSettings, n_timesteps, env_kwargs, checkpoints) from a ``ppo_gpu`` YAML file.
+    """(PPOSettings, n_timesteps, env_kwargs, checkpoints) from a ``gpu_ppo`` YAML file.
 
-    Keys: those of :class:`~.ppo.PPOSettings`, ``n_timesteps`` (env steps per seed),
-    ``checkpoints`` (agent snapshots per run) and ``env_kwargs``; unknown keys, values
-    out of range and files that are not small plain YAML raise GpuConfigError.
+    One block keyed by the env id holds the keys: those of :class:`~.ppo.PPOSettings`,
+    ``n_timesteps`` (env steps per seed), ``checkpoints`` (agent snapshots per run) and
+    ``env_kwargs``; unknown keys, values out of range and files that are not small plain
+    YAML (aliases included) raise GpuConfigError.
     """
     import yaml
 
@@ -74,13 +75,20 @@ def read_config(path: Path) -> tuple:
         raise GpuConfigError(f"config {path} is larger than {MAX_CONFIG_BYTES} bytes")
     try:
         text = path.read_text()
+        # an alias can expand a small file into a huge document: refuse them unparsed
+        if any(isinstance(event, yaml.AliasEvent) for event in yaml.parse(text)):
+            raise GpuConfigError(f"config {path}: YAML anchors and aliases are not accepted")
         doc = yaml.safe_load(text)
     except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
         raise GpuConfigError(f"config {path} is not readable YAML: {exc}") from None
-    if "&" in text and "*" in text:
-        raise GpuConfigError(f"config {path}: YAML anchors and aliases are not accepted")
-    if not isinstance(doc, dict):
-        raise GpuConfigError(f"config {path} must be a mapping of keys, got {type(doc).__name__}")
+    import tether_gym
+
+    if not isinstance(doc, dict) or set(doc) != {tether_gym.ENV_ID} \
+            or not isinstance(doc[tether_gym.ENV_ID], dict):
+        raise GpuConfigError(f"config {path} must hold one mapping keyed by the env id "
+                             f"{tether_gym.ENV_ID!r} (as every file of configs/), got "
+                             f"{sorted(doc) if isinstance(doc, dict) else type(doc).__name__}")
+    doc = doc[tether_gym.ENV_ID]
     names = {f.name for f in fields(PPOSettings)}
     extra = {"n_timesteps", "env_kwargs", "checkpoints"}
     unknown = sorted(set(doc) - names - extra)
@@ -120,7 +128,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="train.py gpu",
                                 description="PPO with env and learner on one torch device.")
     p.add_argument("--config", type=Path, default=DEFAULT_CONFIG,
-                   help="ppo_gpu YAML (default: the packaged configs/ppo_gpu.yml)")
+                   help="gpu_ppo YAML (default: the packaged configs/gpu_ppo.yml)")
     p.add_argument("--seed", type=int, default=0, help="first seed (default 0)")
     p.add_argument("--seeds", type=int, default=1, help="seeds trained at once (default 1)")
     p.add_argument("--timesteps", type=int, default=None, help="env steps per seed")

@@ -29,7 +29,7 @@ __all__ = ["PPOSettings", "MultiSeedPolicy", "RunningStats", "learning_rate_at"]
 
 @dataclass(frozen=True)
 class PPOSettings:
-    """Hyperparameters of one GPU PPO run (the keys of configs/ppo_gpu.yml).
+    """Hyperparameters of one GPU PPO run (the keys of configs/gpu_ppo.yml).
 
     Attributes
     ----------

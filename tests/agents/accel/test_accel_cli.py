@@ -37,11 +37,15 @@ def test_train_gpu_on_cpu_writes_runs_that_evaluate_scores(tmp_path, capsys):
     assert res
 
 
+BLOCK = "tether_gym/TetherLibration-v1:\n  "
+
+
 @pytest.mark.parametrize("text, message", [
-    ("n_envs: 0\n", "n_envs=0 must be an integer in"),
-    ("n_epochs: 1000000000\n", "n_epochs=1000000000 must be an integer in"),
-    ("learning_rate: .nan\n", "learning_rate=nan"),
-    ("bogus: 1\n", "unknown key"),
+    (BLOCK + "n_envs: 0\n", "n_envs=0 must be an integer in"),
+    (BLOCK + "n_epochs: 1000000000\n", "n_epochs=1000000000 must be an integer in"),
+    (BLOCK + "learning_rate: .nan\n", "learning_rate=nan"),
+    (BLOCK + "bogus: 1\n", "unknown key"),
+    ("n_envs: 8\n", "keyed by the env id"),
     ("a: &x [1]\nb: *x\n", "anchors"),
     ("[", "not readable YAML"),
 ])
