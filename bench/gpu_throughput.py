@@ -57,6 +57,48 @@ def torch_rate(num, device, steps, warmup=3, mode="same_step"):
             "env_steps_per_s": num / dt}
 
 
+def compiled_rate(num, device, steps):
+    """The step's core (physics, failure code, reward, observation) under torch.compile.
+
+    No resets and no random draws: what a fused step would cost. Returns the compile
+    time (first call) and the steady-state time per step.
+    """
+    import torch
+
+    from tether_gym_agents.accel import chain
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    env = TorchTetherVecEnv(num, device=device, seed=0, check_actions=False, **ENV_KWARGS)
+    env.reset()
+    cc = env.cc
+
+    def core(nu, y, u, dist, noise, par):
+        nu2, res = chain.advance(nu, y, u * cc.max_reel_rate, dist, par, cc, cc.substeps)
+        code = chain.failure_code(res.y, res.tension_min, cc)
+        ref = cc.amplitude * torch.sin(cc.frequency * nu2)
+        dref = cc.amplitude * cc.frequency * torch.cos(cc.frequency * nu2)
+        reward, _ = chain.reward(res.y, u, torch.zeros_like(u), res.tension_min, ref, dref, cc)
+        obs = chain.observation(nu2, res.y, noise, par, u, cc)
+        return nu2, res.y, obs, code, reward
+
+    fused = torch.compile(core, dynamic=False)
+    args = [env.nu, env.y, env.u, env.disturbance, env.noise, env.par]
+    t = time.perf_counter()
+    out = fused(*args)
+    _sync(env.device)
+    first = time.perf_counter() - t
+    for _ in range(3):
+        out = fused(out[0], out[1], *args[2:])
+    _sync(env.device)
+    t = time.perf_counter()
+    for _ in range(steps):
+        out = fused(out[0], out[1], *args[2:])
+    _sync(env.device)
+    dt = (time.perf_counter() - t) / steps
+    return {"what": "torch.compile core step", "device": str(env.device), "envs": num,
+            "compile_and_first_s": first, "ms_per_step": dt * 1e3, "env_steps_per_s": num / dt}
+
+
 def numba_rate(num, steps, warmup=3):
     import gymnasium as gym
 
@@ -79,6 +121,9 @@ def numba_rate(num, steps, warmup=3):
 def numba_cuda_probe(num):
     """Compile a CUDA kernel that calls the existing numba step of one chain per thread."""
     out = {"what": "numba-cuda probe", "envs": num}
+    if not hasattr(np, "row_stack"):  # removed in numpy 2.5; numba-cuda 0.2x still calls it
+        np.vstack = np.vstack
+        out["shim"] = "np.row_stack = np.vstack"
     try:
         from numba import cuda
 
@@ -137,6 +182,7 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--numba", action="store_true")
     p.add_argument("--numba-cuda", action="store_true")
+    p.add_argument("--compile", action="store_true", help="also time the torch.compile'd core")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
     import torch
@@ -156,6 +202,11 @@ def main(argv=None) -> int:
         print(json.dumps(row), flush=True)
         if args.numba:
             row = numba_rate(num, args.steps)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    if args.compile:
+        for num in args.envs:
+            row = compiled_rate(num, device, args.steps)
             rows.append(row)
             print(json.dumps(row), flush=True)
     if args.numba_cuda:

@@ -29,10 +29,15 @@ import torch
 
 from tether_gym.physics.state import PARAMS, STATE
 from tether_gym.tasks.reward import TERMS, RewardParams
-from tether_gym.tasks.termination import DIVERGENCE_BOUND, TUMBLE_ANGLE, Failure
+from tether_gym.tasks.termination import (
+    DIVERGENCE_BOUND,
+    KEEP_PREVIOUS,
+    TUMBLE_ANGLE,
+    Failure,
+)
 
-__all__ = ["ChainConsts", "StepResult", "rhs", "advance", "reel_accel", "failure_code",
-           "reward", "observation", "info_vectors", "TUMBLE_ANGLE"]
+__all__ = ["ChainConsts", "StepResult", "TaskStep", "control_step", "rhs", "advance",
+           "reel_accel", "failure_code", "reward", "observation", "info_vectors", "TUMBLE_ANGLE"]
 
 LENGTH_FLOOR = 1.0e-6
 """Smallest l [-] whose logarithm the observation takes (as the numba step)."""
@@ -252,6 +257,59 @@ def advance(nu, y, command, disturbance, par, cc: ChainConsts, substeps: int):
     deriv, ten = rhs(t, y, command, disturbance, par, cc, True)
     tmin = _fold_min(tmin, ten)
     return t, StepResult(y, tmin, deriv, ten)
+
+
+class TaskStep(NamedTuple):
+    """Everything one control step produces for every row (:func:`control_step`)."""
+
+    nu: torch.Tensor
+    y: torch.Tensor
+    u: torch.Tensor            # the normalised command in force [-]
+    tension: torch.Tensor
+    tension_min: torch.Tensor
+    derivative: torch.Tensor
+    reward: torch.Tensor
+    components: torch.Tensor
+    failure: torch.Tensor      # int64 Failure codes
+    obs: torch.Tensor          # float32
+
+
+def control_step(nu, y, u, action, disturbance, noise, par, cc: ChainConsts) -> TaskStep:
+    """One control step of every row (``step_kernel.step_rows`` with reset False).
+
+    The action sets the command (``envs.actions.next_command``), the chain advances
+    (:func:`advance`), the failure code, reward and observation follow
+    (``step_kernel._task``, ``write_outputs``); a non-finite or diverged step keeps the
+    previous state with reward 0 and its non-finite tensions and derivative zeroed.
+    A pure function of tensors: ``torch.compile`` can fuse it.
+    """
+    n = cc.n
+    clipped = torch.clamp(action, -1.0, 1.0)
+    u = torch.clamp(u + cc.increment_gain * clipped, -1.0, 1.0) if cc.incremental \
+        else clipped
+    nu, res = advance(nu, y, u * cc.max_reel_rate, disturbance, par, cc, cc.substeps)
+    code = failure_code(res.y, res.tension_min, cc)
+    keep = (code == KEEP_PREVIOUS[0]) | (code == KEEP_PREVIOUS[1])
+    kc = keep[:, None]
+    y = torch.where(kc, y, res.y)
+
+    def finite_or_zero(x):
+        return torch.where(kc & ~torch.isfinite(x), torch.zeros_like(x), x)
+
+    tension = finite_or_zero(res.tension)
+    tension_min = finite_or_zero(res.tension_min)
+    derivative = finite_or_zero(res.derivative)
+    sn = torch.sin(nu)[:, None]
+    e = par[:, :1]
+    k = 1.0 + e * torch.cos(nu)[:, None]
+    accel = reel_accel(k, sn, e, y[:, 3 * n:], derivative[:, 3 * n:]) / cc.accel_ref
+    ref = cc.amplitude * torch.sin(cc.frequency * nu)
+    dref = cc.amplitude * cc.frequency * torch.cos(cc.frequency * nu)
+    rew, comps = reward(y, u, accel, tension_min, ref, dref, cc)
+    rew = torch.where(keep, torch.zeros_like(rew), rew)
+    comps = torch.where(kc, torch.zeros_like(comps), comps)
+    obs = observation(nu, y, noise, par, u, cc)
+    return TaskStep(nu, y, u, tension, tension_min, derivative, rew, comps, code, obs)
 
 
 def failure_code(y, tension_min, cc: ChainConsts) -> torch.Tensor:

@@ -135,6 +135,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-envs", type=int, default=None, help="envs per seed")
     p.add_argument("--device", default="auto", help="cuda, cuda:K, cpu or auto (default)")
     p.add_argument("--out", type=Path, default=Path("runs/ppo_gpu"), help="output folder")
+    p.add_argument("--compile", action="store_true",
+                   help="fuse the env's step with torch.compile (compiles at the first step)")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -185,7 +187,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
           f"{steps} env steps per seed -> {args.out}")
     summary = train_seeds(settings, GpuRun(seeds, steps, env_kwargs, args.out, device,
                                            checkpoints=checkpoints, command=command,
-                                           clock_start=start, max_seconds=max_seconds))
+                                           clock_start=start, max_seconds=max_seconds,
+                                           compile=args.compile))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

@@ -75,7 +75,8 @@ class GpuRun:
     ``seeds``: trained at once; ``timesteps``: env steps per seed; ``max_seconds``: stop
     after the first update that ends later than this wall time [s] (counted from
     ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
-    agent snapshots per run; ``eval_episodes``: the final check's episodes per seed.
+    agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
+    ``compile``: the env's step through ``torch.compile`` (:class:`TorchTetherVecEnv`).
     """
 
     seeds: list[int]
@@ -88,6 +89,7 @@ class GpuRun:
     clock_start: float | None = None
     max_seconds: float = math.inf
     eval_episodes: int = 64
+    compile: bool = False
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -104,7 +106,8 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     S, N, T = len(seeds), settings.n_envs, settings.n_steps
     torch.manual_seed(int(seeds[0]))
     env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
-                            autoreset_mode="same_step", check_actions=False, **env_kwargs)
+                            autoreset_mode="same_step", check_actions=False,
+                            compile=run.compile, **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's step size scales its gradient instead (see _update), so that the

@@ -21,7 +21,7 @@ from tether_gym.envs.layout import INFO_KEYS
 from tether_gym.envs.tether_libration import action_space, observation_space
 from tether_gym.physics.state import PARAMS, STATE
 from tether_gym.tasks.reward import COMPONENTS
-from tether_gym.tasks.termination import KEEP_PREVIOUS, TUMBLE_ANGLE, Failure
+from tether_gym.tasks.termination import TUMBLE_ANGLE, Failure
 
 from . import chain
 
@@ -132,11 +132,14 @@ class TorchTetherVecEnv:
     (torch.float64 or torch.float32), ``seed`` (int or None), ``autoreset_mode``,
     ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
     False: a NaN action turns its row's state non-finite, which terminates it as
-    ``"nonfinite"``), and every keyword argument of ``gym.make``.
+    ``"nonfinite"``), ``compile`` (True: the step's arithmetic, :func:`~.chain.control_step`,
+    runs through ``torch.compile``, fused into few kernels; its first step compiles, tens
+    of seconds), and every keyword argument of ``gym.make``.
     """
 
     def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
-                 autoreset_mode: str = "next_step", check_actions: bool = True, **env_kwargs):
+                 autoreset_mode: str = "next_step", check_actions: bool = True,
+                 compile: bool = False, **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
                             f"{num_envs!r}")
@@ -161,6 +164,13 @@ class TorchTetherVecEnv:
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.cc = chain_consts(self.config, self.device, dtype)
+        cc = self.cc
+
+        def control_step(*tensors):
+            return chain.control_step(*tensors, cc)
+
+        self._control_step = (torch.compile(control_step, dynamic=False) if compile
+                              else control_step)
         self._plan = StartPlan.of(self.config)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
@@ -397,7 +407,7 @@ class TorchTetherVecEnv:
 
         ``draw`` False keeps the disturbance and noise rows as they are (tests set them).
         """
-        cc, n, cfg = self.cc, self.n, self.config
+        cfg = self.config
         g = self.generator
         if draw and cfg.disturbance > 0.0:
             d = cfg.disturbance
@@ -412,30 +422,9 @@ class TorchTetherVecEnv:
                                      self.noise)
         ended_start = rows & self._start_failed
         live = rows & ~self._start_failed
-        clipped = torch.clamp(a, -1.0, 1.0)
-        u = torch.clamp(self.u + cc.increment_gain * clipped, -1.0, 1.0) if cc.incremental \
-            else clipped
-        nu, res = chain.advance(self.nu, self.y, u * cc.max_reel_rate, self.disturbance,
-                                self.par, cc, cc.substeps)
-        code = chain.failure_code(res.y, res.tension_min, cc)
-        keep = (code == KEEP_PREVIOUS[0]) | (code == KEEP_PREVIOUS[1])
-        kc = keep[:, None]
-        y = torch.where(kc, self.y, res.y)
-        def finite_or_zero(x):
-            return (torch.where(kc & ~torch.isfinite(x), torch.zeros_like(x), x))
-        tension = finite_or_zero(res.tension)
-        tension_min = finite_or_zero(res.tension_min)
-        derivative = finite_or_zero(res.derivative)
-        sn = torch.sin(nu)[:, None]
-        e = self.par[:, :1]
-        k = 1.0 + e * torch.cos(nu)[:, None]
-        accel = chain.reel_accel(k, sn, e, y[:, 3 * n:], derivative[:, 3 * n:]) / cc.accel_ref
-        ref = cc.amplitude * torch.sin(cc.frequency * nu)
-        dref = cc.amplitude * cc.frequency * torch.cos(cc.frequency * nu)
-        reward, comps = chain.reward(y, u, accel, tension_min, ref, dref, cc)
-        reward = torch.where(keep, torch.zeros_like(reward), reward)
-        comps = torch.where(kc, torch.zeros_like(comps), comps)
-        obs = chain.observation(nu, y, self.noise, self.par, u, cc)
+        out = self._control_step(self.nu, self.y, self.u, a, self.disturbance, self.noise,
+                                 self.par)
+        nu, y, u, tension, tension_min, derivative, reward, comps, code, obs = out
         lc = live[:, None]
         self.nu = torch.where(live, nu, self.nu)
         self.y = torch.where(lc, y, self.y)

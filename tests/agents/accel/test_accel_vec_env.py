@@ -139,3 +139,21 @@ def test_bad_input_is_refused():
     if not torch.cuda.is_available():
         with pytest.raises(ValueError, match="pip install"):
             TorchTetherVecEnv(2, device="cuda")
+
+
+@pytest.mark.slow
+def test_compiled_step_equals_the_eager_step():
+    """``compile=True`` fuses the step (torch.compile): same trajectory to 1e-12."""
+    kwargs = {**TRAINING, "disturbance": 0.1, "obs_noise": 1e-3}
+    envs = [TorchTetherVecEnv(16, device="cpu", seed=4, compile=c, **kwargs)
+            for c in (False, True)]
+    for env in envs:
+        env.reset()
+    action = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (30, 16, 2)))
+    for a in action:
+        (o0, r0, t0, u0, _), (o1, r1, t1, u1, _) = (env.step(a) for env in envs)
+        np.testing.assert_allclose(envs[1].y.numpy(), envs[0].y.numpy(), rtol=1e-12,
+                                   atol=1e-15)
+        np.testing.assert_allclose(r1.numpy(), r0.numpy(), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(o1.numpy(), o0.numpy(), rtol=2.0**-23, atol=1e-7)
+        assert torch.equal(t0, t1) and torch.equal(u0, u1)
