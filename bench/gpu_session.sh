@@ -7,14 +7,8 @@
 #   4. ten seeds in one process of the candidate whose final deterministic episodes on the
 #      training distribution (not a benchmark suite) return the most, 140 s;
 #   5. every run folder packed into $OUT/runs.tar.gz, for `python evaluate.py` here.
-# Needs the wheels of gymnasium, Farama-Notifications and stable-baselines3 in .whl/
-# (the device image has torch, numba, numba-cuda, safetensors, pyyaml).
-set -u
-export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-    --target /tmp/site .whl/*.whl || exit 1
-ln -sfn "$PWD/agents" /tmp/site/tether_gym_agents
-export PYTHONPATH=/tmp/site:$PWD
+# Needs the wheels that bench/gpu_setup.sh installs, in .whl/.
+. bench/gpu_setup.sh
 LOG=$OUT/log.txt
 stamp() { date +%s.%N; }
 {

@@ -3,12 +3,7 @@
 # paused): the three one-step equality cases that failed on the GPU in the first session,
 # with their sizes; the torch.compile'd step's compile time and throughput; numba-cuda
 # again, with np.row_stack restored; one seed of candidate B with the fused env step.
-set -u
-export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
-python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
-    --target /tmp/site .whl/*.whl || exit 1
-ln -sfn "$PWD/agents" /tmp/site/tether_gym_agents
-export PYTHONPATH=/tmp/site:$PWD
+. bench/gpu_setup.sh
 {
 echo "== equality on the GPU"
 TETHER_TEST_DEVICE=cuda timeout 90 python3 -m pytest -q -p no:cacheprovider \
