@@ -8,7 +8,7 @@
 * :mod:`.predictive`: :class:`~.predictive.OneStepPredictive`, the held command whose
   nominal step makes the sliding variable decay by a set factor (``predictive``);
 * :mod:`.mpc`: :class:`~.mpc.ModelPredictiveController`, nonlinear MPC with hard
-  constraints over its horizon (``mpc``; CasADi, ``pip install "tether_gym[mpc]"``), on
+  constraints over its horizon (``mpc``; CasADi, ``pip install -e ".[mpc]"``), on
   the symbolic model of :mod:`.mpc_model` (tested equal to the physics); both share
   :mod:`.prediction` (the nominal step, the reference ahead).
 

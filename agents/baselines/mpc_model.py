@@ -42,7 +42,7 @@ from tether_gym.physics import PARAMS, STATE
 
 __all__ = ["casadi", "INSTALL_HINT", "step_function", "rhs_function", "param_index"]
 
-INSTALL_HINT = 'pip install "tether_gym[mpc]"'
+INSTALL_HINT = 'pip install -e ".[mpc]" (in a clone of tether_gym)'
 """The pip command that installs CasADi for the model-predictive controller."""
 
 _CACHE: dict[tuple, Any] = {}

@@ -104,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "on 2-core machines under load)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument("--verbose", type=int, default=0)
-    fan = p.add_argument_group("many runs on Ray (pip install \"tether_gym[ray]\")")
+    fan = p.add_argument_group("many runs on Ray (pip install -e \".[ray]\")")
     fan.add_argument("--seeds", type=int, default=None, metavar="N",
                      help="train seeds --seed ... --seed+N-1 into <out>/seed_K/, one Ray task "
                           "each; re-running skips finished seeds and resumes interrupted ones")

@@ -68,8 +68,8 @@ def nominal_mpc(env, scenario: Scenario, seed: int | None = None):
     """``mpc``: the model-predictive controller on the nominal model, behind the filter.
 
     One object per episode (``seed`` is not used: the controller is deterministic, but
-    it keeps its last plan as the next warm start). Needs CasADi (``pip install
-    "tether_gym[mpc]"``); ModuleNotFoundError with that command otherwise.
+    it keeps its last plan as the next warm start). Needs CasADi (``pip install -e
+    ".[mpc]"`` in a clone); ModuleNotFoundError with that command otherwise.
     """
     from ..baselines.mpc import ModelPredictiveController
     from ..hybrids.policies import FilteredPolicy

@@ -87,7 +87,8 @@ _POLICY_CLASSES = {
 }
 # the part of the policy that ``predict`` uses (SAC's and TQC's critics are not needed to act)
 _WEIGHTS_MODULE = {"ppo": "policy", "sac": "actor", "tqc": "actor"}
-SB3_CONTRIB_PIP = 'pip install "tether_gym[tqc]" (or pip install "sb3-contrib>=2.4")'
+SB3_CONTRIB_PIP = ('pip install -e ".[tqc]" in a clone of tether_gym (or pip install '
+                   '"sb3-contrib>=2.4")')
 """How to install sb3-contrib, whose TQC is an optional extra."""
 _PIP = {"sb3_contrib": SB3_CONTRIB_PIP}
 ALGOS = tuple(sorted(_WEIGHTS_MODULE))

@@ -41,7 +41,7 @@ Progress
     prints one summary line per seed as it finishes (steps, wall time of this call
     and of the whole run) and appends it to ``<out>/fanout.log``.
 
-Ray is an optional dependency (``pip install "tether_gym[ray]"``); a single-seed
+Ray is an optional dependency (``pip install -e ".[ray]"``); a single-seed
 ``train.py`` never imports it, and neither does ``--seeds 1`` without
 ``--ray-address`` or ``RAY_ADDRESS`` (it trains in this process). Ctrl-C stops every
 task; the same command then resumes them.
@@ -74,7 +74,7 @@ from .settings import TrainOptions, TrainSettings, resolve_settings
 __all__ = ["RAY_PIP", "RunState", "SeedStatus", "SeedJob", "SeedResult", "run_fanout", "run_jobs",
            "init_ray", "shutdown_ray", "require_ray", "run_state", "train_seed"]
 
-RAY_PIP = 'pip install "tether_gym[ray]"'
+RAY_PIP = 'pip install -e ".[ray]" (in a clone of tether_gym)'
 #: Environment of every Ray task: one numba, OpenMP and MKL thread per run.
 TASK_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 #: Training calls per seed and invocation: the first continues from the latest

@@ -188,7 +188,7 @@ def test_missing_matplotlib(monkeypatch):
     monkeypatch.setitem(sys.modules, "matplotlib", None)
     monkeypatch.delitem(sys.modules, "tether_gym.envs.rendering")
     module = importlib.import_module("tether_gym.envs.rendering")
-    hint = r'pip install "tether_gym\[plot\]"'
+    hint = r'pip install -e "\.\[plot\]"'
     with pytest.raises(DependencyNotInstalled, match=hint):
         module.ChainRenderer(EnvConfig.from_kwargs(), "rgb_array")
     env = gym.make("tether_gym/TetherLibration-v1", render_mode="rgb_array")

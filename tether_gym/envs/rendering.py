@@ -1,6 +1,6 @@
 """Matplotlib rendering of the tethered chain (``render_mode`` "rgb_array" or "human").
 
-matplotlib is optional (``pip install "tether_gym[plot]"``) and is imported only when
+matplotlib is optional (``pip install -e ".[plot]"``) and is imported only when
 a :class:`ChainRenderer` is built, so this module imports without it.
 
 One frame shows
@@ -41,7 +41,8 @@ FRAME_SIZE = 480
 """Width and height of an ``rgb_array`` frame [px]."""
 
 _DPI = 100
-_INSTALL_HINT = 'matplotlib is needed for rendering: pip install "tether_gym[plot]"'
+_INSTALL_HINT = ('matplotlib is needed for rendering: pip install -e ".[plot]" in a clone of '
+                 'tether_gym (or pip install matplotlib)')
 _SLACK_COLOUR = "tab:red"
 _REF_COLOUR = "tab:orange"
 

@@ -136,12 +136,12 @@ def test_package_imports_without_casadi_and_mpc_says_how_to_install():
             "    print('ERR', exc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout
-    assert 'ERR' in out and 'pip install "tether_gym[mpc]"' in out
+    assert 'ERR' in out and 'pip install -e ".[mpc]"' in out
 
 
 def test_missing_casadi_error_in_process(monkeypatch):
     monkeypatch.setitem(sys.modules, "casadi", None)
-    with pytest.raises(ModuleNotFoundError, match=r'pip install "tether_gym\[mpc\]"'):
+    with pytest.raises(ModuleNotFoundError, match=r'pip install -e "\.\[mpc\]"'):
         make_policy("mpc", _env())
 
 

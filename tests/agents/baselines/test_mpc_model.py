@@ -78,5 +78,5 @@ def test_missing_casadi_names_the_pip_command(monkeypatch):
     import sys
 
     monkeypatch.setitem(sys.modules, "casadi", None)
-    with pytest.raises(ModuleNotFoundError, match=r'pip install "tether_gym\[mpc\]"'):
+    with pytest.raises(ModuleNotFoundError, match=r'pip install -e "\.\[mpc\]"'):
         mpc_model.casadi()
