@@ -24,10 +24,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numpy as np
 import torch
 
-from tether_gym.physics.state import PARAMS, STATE
+from tether_gym.physics.state import PARAMS
 from tether_gym.tasks.reward import TERMS, RewardParams
 from tether_gym.tasks.termination import (
     DIVERGENCE_BOUND,
@@ -410,13 +409,3 @@ def info_vectors(nu, y, par, result: StepResult, cc: ChainConsts):
     dl = y[:, 3 * n:]
     ddl = result.derivative[:, 3 * n:]
     return cc.accel_scale * reel_accel(k, sn, e, dl, ddl), ddl
-
-
-def state_names() -> tuple:
-    """The STATE layout's field names (checked by the env: this module assumes them)."""
-    return STATE.names
-
-
-def as_tensor(x, like: torch.Tensor) -> torch.Tensor:
-    """``x`` (array or number) on ``like``'s device and dtype."""
-    return torch.as_tensor(np.asarray(x), dtype=like.dtype, device=like.device)

@@ -150,8 +150,7 @@ class TorchTetherVecEnv:
         if autoreset_mode not in AUTORESET_MODES:
             raise ValueError(f"autoreset_mode={autoreset_mode!r} must be one of "
                              f"{AUTORESET_MODES}")
-        if STATE.names != chain.state_names() or STATE.names != (
-                "theta", "dtheta", "length", "dlength"):
+        if STATE.names != ("theta", "dtheta", "length", "dlength"):
             raise RuntimeError(f"the torch step assumes the state order theta, dtheta, "
                                f"length, dlength, not {STATE.names}")
         self.config = EnvConfig.from_kwargs(**env_kwargs)
