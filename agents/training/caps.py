@@ -284,3 +284,10 @@ def caps_tqc_class():
     CapsTQC.__module__ = __name__
     _TQC_CLASS.append(CapsTQC)
     return CapsTQC
+
+
+def __getattr__(name: str):
+    """``CapsTQC`` on first use (:func:`caps_tqc_class`), as the algorithm table names it."""
+    if name == "CapsTQC":
+        return caps_tqc_class()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
