@@ -9,15 +9,16 @@ pairwise sum along the last axis): row i of a batch is bitwise the same as row i
 whatever the batch size, thread count or the other rows. The actions agree with SB3's
 float32 forward pass to float32 rounding (tests/agents/test_mlp.py).
 
-Supported: PPO/A2C ``ActorCriticPolicy`` without gSDE and SAC/TD3-style actors with a
-``mu`` head, on flattened Box observations, with Linear layers and Tanh/ReLU activations.
+Supported: PPO/A2C ``ActorCriticPolicy`` without gSDE, SAC/TQC actors (a body and a
+``mu`` head) and TD3's deterministic actor (``mu`` ending in tanh), on flattened Box
+observations, with Linear layers and Tanh/ReLU activations.
 :meth:`NumpyMLP.from_policy` returns None for anything else (the caller keeps torch).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -59,7 +60,7 @@ class NumpyMLP:
     """The deterministic action of an MLP policy (see the module docstring).
 
     ``squash``: the network's output passes through tanh and is rescaled from [-1, 1]
-    to the action box (SAC); otherwise it is clipped to the box (PPO).
+    to the action box (SAC, TQC, TD3); otherwise it is clipped to the box (PPO).
     """
 
     layers: tuple[_Layer, ...]
@@ -84,10 +85,17 @@ class NumpyMLP:
             body = _layers(policy.mlp_extractor.policy_net)
             head = _layers([policy.action_net])
             squash = bool(policy.squash_output)
-        elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):
-            actor = policy.actor
+        elif hasattr(policy, "actor") and hasattr(policy.actor, "latent_pi"):
+            actor = policy.actor  # SAC, TQC: a body and a mean head, squashed by tanh
             body = _layers(actor.latent_pi)
             head = _layers(actor.mu if hasattr(actor.mu, "__iter__") else [actor.mu])
+            squash = True
+        elif hasattr(policy, "actor") and hasattr(policy.actor, "mu"):
+            # TD3: mu is the whole network and ends in the tanh that squashes the action
+            layers = _layers(policy.actor.mu)
+            if not layers or layers[-1].activation != "Tanh":
+                return None
+            body, head = layers[:-1], [replace(layers[-1], activation=None)]
             squash = True
         else:
             return None

@@ -13,11 +13,13 @@ regular file inside the run folder (:mod:`.folder_paths`).
 
 from __future__ import annotations
 
+import importlib
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from ..common.algorithms import ALGORITHMS, ALGOS, split_name
 from ..common.features import FeatureSpec
 from ..hybrids.residual_spec import ResidualSpec
 from .run_folder import (
@@ -29,8 +31,6 @@ from .run_folder import (
 )
 from .safe_format import (
     AGENT_FILE,
-    ALGOS,
-    SB3_CONTRIB_PIP,
     AgentLoadError,
     ObsNormalization,
     checked_file,
@@ -53,7 +53,9 @@ class PickledRun:
 
     Attributes
     ----------
-    model : stable_baselines3 PPO or SAC
+    model : stable_baselines3 (or sb3-contrib) model
+        Of the library class of its algorithm's row
+        (:data:`~tether_gym_agents.common.algorithms.ALGORITHMS`).
     norm : ObsNormalization or None
         Its observation statistics (None: observations were not normalised).
     algo : str
@@ -134,8 +136,9 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
         raise _refuse([model_path] + ([stats] if stats.is_file() else []))
     checked_file(run_dir, model_path)
     cfg = _run_config(run_dir, model_path) if zoo is None else _zoo_config(zoo)
-    algo = (algo or cfg.get("algo") or "").lower()
-    if algo not in ALGOS:
+    algo = algo or cfg.get("algo") or ""
+    algo = algo.lower() if isinstance(algo, str) else ""
+    if algo not in ALGORITHMS:
         where = run_dir / CONFIG_FILE if zoo is None else zoo.params_dir / "args.yml"
         raise AgentLoadError(f"{where} does not record a supported algorithm (one of "
                              f"{list(ALGOS)}), got {cfg.get('algo')!r}")
@@ -144,16 +147,13 @@ def load_pickled_run(path, allow_pickle: bool = False, algo: str | None = None) 
         raise AgentLoadError(f"{run_dir / CONFIG_FILE} does not record hyperparams.normalize: "
                              "cannot tell whether observations must be normalised")
     warnings.warn(PICKLE_WARNING.format(files=[str(model_path)]), stacklevel=2)
-    from stable_baselines3 import PPO, SAC
-
-    if algo == "tqc":
-        try:
-            from sb3_contrib import TQC
-        except ImportError:
-            raise AgentLoadError(f"{model_path} is a TQC model: {SB3_CONTRIB_PIP}") from None
-        cls: Any = TQC
-    else:
-        cls = {"ppo": PPO, "sac": SAC}[algo]
+    row = ALGORITHMS[algo]
+    module, name = split_name(row.library_model)
+    try:
+        cls: Any = getattr(importlib.import_module(module), name)
+    except ImportError:
+        raise AgentLoadError(f"{model_path} is a {algo.upper()} model: {row.install()}"
+                             ) from None
     try:
         model = cls.load(model_path, device="cpu")
     except (zipfile.BadZipFile, KeyError, ValueError, EOFError, RuntimeError) as exc:

@@ -3,8 +3,9 @@
 An agent is one folder (a *unit*) with two files:
 
 ``agent.json``
-    Plain JSON: the format version, the algorithm (``"ppo"``, ``"sac"`` or ``"tqc"``), the
-    stable-baselines3 policy class and its constructor settings (``net_arch``,
+    Plain JSON: the format version, the algorithm (a name of
+    :data:`tether_gym_agents.common.algorithms.ALGORITHMS`: ``"ppo"``, ``"sac"``, ``"tqc"``,
+    ``"td3"``), the stable-baselines3 policy class and its constructor settings (``net_arch``,
     activation, ``log_std_init``, ...), the observation and action spaces (shape,
     dtype, bounds), the observation normalisation statistics (``mean``, ``var``,
     ``clip_obs``, ``epsilon``; ``null`` when observations are not normalised), the env
@@ -41,9 +42,10 @@ file, the key and what is allowed:
 * ``obs_normalization``: ``mean`` finite; ``var`` finite and >= 0; ``clip_obs`` a finite
   number > 0; ``epsilon`` a finite number in [0, 1]; ``count`` a finite number >= 0.
 * spaces: 1 to 4 axes, at most 100,000 entries.
-* ``policy_kwargs.net_arch``: a list (or a ``pi``/``vf`` (PPO), ``pi``/``qf`` (SAC)
-  mapping) of at most 8 layers, each 1 to 4096 units wide, and at most 20,000,000
-  parameters in the networks the policy builds (about 80 MB of float32).
+* ``policy_kwargs.net_arch``: a list (or a mapping of the algorithm's ``net_keys``:
+  ``pi``/``vf`` (PPO), ``pi``/``qf`` (SAC, TQC, TD3)) of at most 8 layers, each 1 to
+  4096 units wide, and at most 20,000,000 parameters in the networks the policy builds
+  (about 80 MB of float32).
 """
 
 from __future__ import annotations
@@ -55,6 +57,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.algorithms import ALGORITHMS, ALGOS, Algorithm, algorithm
 from ..common.features import FeatureSpec
 from ..common.jsonio import sha256_file, to_jsonable
 from ..hybrids.residual_spec import ResidualSpec
@@ -79,20 +82,10 @@ WEIGHTS_FILE = "policy.safetensors"
 FORMAT = "tether_gym-agent"
 FORMAT_VERSION = 1
 
-# Class-valued policy settings are stored by name and looked up here, never imported.
-_POLICY_CLASSES = {
-    ("ppo", "ActorCriticPolicy"): ("stable_baselines3.common.policies", "ActorCriticPolicy"),
-    ("sac", "SACPolicy"): ("stable_baselines3.sac.policies", "SACPolicy"),
-    ("tqc", "TQCPolicy"): ("sb3_contrib.tqc.policies", "TQCPolicy"),
-}
-# the part of the policy that ``predict`` uses (SAC's and TQC's critics are not needed to act)
-_WEIGHTS_MODULE = {"ppo": "policy", "sac": "actor", "tqc": "actor"}
-SB3_CONTRIB_PIP = ('pip install -e ".[tqc]" in a clone of tether_gym (or pip install '
-                   '"sb3-contrib>=2.4")')
+SB3_CONTRIB_PIP = ALGORITHMS["tqc"].install()
 """How to install sb3-contrib, whose TQC is an optional extra."""
-_PIP = {"sb3_contrib": SB3_CONTRIB_PIP}
-ALGOS = tuple(sorted(_WEIGHTS_MODULE))
-"""The algorithms whose agents can be saved and loaded."""
+# Policy classes are looked up by the name the algorithm's row of the table gives
+# (tether_gym_agents.common.algorithms), never imported from a file.
 _REQUIRED = ("format", "format_version", "algo", "policy_class", "policy_kwargs",
              "observation_space", "action_space", "obs_normalization", "weights", "env")
 
@@ -184,9 +177,11 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
     path : path-like
         The agent folder (created; ``agent.json`` and ``policy.safetensors`` are replaced).
     policy : stable_baselines3 policy
-        ``model.policy`` of a PPO, SAC or TQC model.
-    algo : {"ppo", "sac", "tqc"}
-        The algorithm that trained it (recorded, so loading never guesses).
+        ``model.policy`` of a model of one of the algorithms of
+        :data:`~tether_gym_agents.common.algorithms.ALGORITHMS`.
+    algo : str
+        The algorithm that trained it (a name of that table: ``"ppo"``, ``"sac"``,
+        ``"tqc"``, ``"td3"``; recorded, so loading never guesses).
     norm : ObsNormalization or None
         Observation statistics of ``VecNormalize`` (None: observations are not
         normalised).
@@ -206,20 +201,19 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
     Path
         The agent folder.
     """
-    algo = algo.lower()
+    row = algorithm(algo)
+    algo = row.name
     if hybrid is not None:
         hybrid = ResidualSpec.from_dict(hybrid, "hybrid").to_dict()
     if features is not None:
         features = FeatureSpec.from_dict(features, "features").to_dict()
-    if algo not in _WEIGHTS_MODULE:
-        raise ValueError(f"algo={algo!r} must be one of {sorted(_WEIGHTS_MODULE)}")
     cls_name = type(policy).__name__
-    if (algo, cls_name) not in _POLICY_CLASSES:
+    if cls_name != row.policy:
         raise TypeError(f"{algo.upper()} policy class {cls_name} cannot be saved; supported: "
-                        f"{sorted(c for a, c in _POLICY_CLASSES if a == algo)}")
+                        f"{[row.policy]}")
     path = Path(path)
     path.mkdir(parents=True, exist_ok=True)
-    weights = _write_weights(path, policy, algo)
+    weights = _write_weights(path, policy, row)
     meta = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "algo": algo,
         "policy_class": cls_name,
@@ -227,7 +221,7 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
         "observation_space": space_to_json(policy.observation_space),
         "action_space": space_to_json(policy.action_space),
         "obs_normalization": norm.to_json() if norm is not None else None,
-        "weights": {"file": WEIGHTS_FILE, "module": _WEIGHTS_MODULE[algo],
+        "weights": {"file": WEIGHTS_FILE, "module": row.weights,
                     "sha256": sha256_file(weights)},
         "env": {"id": env_id, "kwargs": to_jsonable(env_kwargs or {})},
         "training": to_jsonable(training or {}),
@@ -244,13 +238,13 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
     return path
 
 
-def _write_weights(path: Path, policy, algo: str) -> Path:
+def _write_weights(path: Path, policy, row: Algorithm) -> Path:
     """Write the acting module's ``state_dict`` as safetensors (atomically); its path."""
-    module = policy if _WEIGHTS_MODULE[algo] == "policy" else policy.actor
+    module = policy if row.weights == "policy" else getattr(policy, row.weights)
     state = {k: v.detach().cpu().clone() for k, v in module.state_dict().items()}
     weights = path / WEIGHTS_FILE
     tmp = path / (WEIGHTS_FILE + ".tmp")
-    _safetensors().save_file(state, str(tmp), metadata={"format": FORMAT, "algo": algo})
+    _safetensors().save_file(state, str(tmp), metadata={"format": FORMAT, "algo": row.name})
     tmp.replace(weights)
     return weights
 
@@ -315,13 +309,13 @@ def load_agent(path):
         kwargs = settings_from_json(meta["policy_kwargs"])
     except PolicyJsonError as exc:
         raise AgentLoadError(str(exc)) from None
-    module_name, cls_name = _POLICY_CLASSES[(meta["algo"], meta["policy_class"])]
+    row = ALGORITHMS[meta["algo"]]
+    cls_name = row.policy
     try:
-        policy_cls = getattr(importlib.import_module(module_name), cls_name)
+        policy_cls = getattr(importlib.import_module(row.policy_module), cls_name)
     except ImportError:
-        package = module_name.split(".")[0]
-        raise AgentLoadError(f"{meta_path}: a {meta['algo'].upper()} agent needs {package}: "
-                             f"{_PIP.get(package, 'pip install ' + package)}") from None
+        raise AgentLoadError(f"{meta_path}: a {row.name.upper()} agent needs {row.package}: "
+                             f"{row.install()}") from None
     try:
         policy = policy_cls(obs_space, act_space, lambda _: 0.0, **kwargs)
     except TypeError as exc:
@@ -330,7 +324,7 @@ def load_agent(path):
         state = _safetensors().load_file(str(weights), device="cpu")
     except Exception as exc:  # noqa: BLE001 - SafetensorError, OSError, ...
         raise AgentLoadError(f"cannot read weights {weights}: {exc}") from None
-    target = policy if meta["weights"]["module"] == "policy" else policy.actor
+    target = policy if row.weights == "policy" else getattr(policy, row.weights)
     try:
         target.load_state_dict(state, strict=True)
     except (RuntimeError, TypeError, AttributeError) as exc:
@@ -366,10 +360,16 @@ def _read_meta(path: Path) -> dict:
     if meta["format_version"] != FORMAT_VERSION:
         raise AgentLoadError(f"{meta_path} has format_version {meta['format_version']!r}; this "
                              f"tether_gym reads version {FORMAT_VERSION}")
-    key = (meta["algo"], meta["policy_class"])
-    if key not in _POLICY_CLASSES:
-        raise AgentLoadError(f"{meta_path}: unsupported algo/policy_class {key}; supported: "
-                             f"{sorted(_POLICY_CLASSES)}")
+    try:
+        row = algorithm(meta["algo"])
+    except (TypeError, ValueError) as exc:
+        raise AgentLoadError(f"{meta_path}: algo: {exc}") from None
+    if meta["algo"] != row.name:
+        raise AgentLoadError(f"{meta_path}: algo={meta['algo']!r}; allowed: {list(ALGOS)} "
+                             "(lower case)")
+    if meta["policy_class"] != row.policy:
+        raise AgentLoadError(f"{meta_path}: policy_class={meta['policy_class']!r} does not fit "
+                             f"algo {row.name!r}; allowed: {row.policy!r}")
     return meta
 
 
@@ -379,9 +379,9 @@ def _checked_weights(path: Path, meta: dict) -> Path:
     info = meta["weights"]
     if not isinstance(info, dict) or set(info) < {"file", "module", "sha256"}:
         raise AgentLoadError(f"{meta_path}: 'weights' must give file, module and sha256")
-    if info["module"] != _WEIGHTS_MODULE[algo]:
+    if info["module"] != ALGORITHMS[algo].weights:
         raise AgentLoadError(f"{meta_path}: weights module {info['module']!r} does not "
-                             f"fit {algo.upper()} (expected {_WEIGHTS_MODULE[algo]!r})")
+                             f"fit {algo.upper()} (expected {ALGORITHMS[algo].weights!r})")
     weights = path / Path(str(info["file"])).name
     if weights.exists():
         checked_file(path, weights)

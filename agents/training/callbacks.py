@@ -27,6 +27,7 @@ from typing import NamedTuple
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CheckpointCallback, EvalCallback
 
+from ..common.algorithms import algorithm
 from ..files.run_folder import (
     BEST_MODEL_FILE,
     CHECKPOINT_AGENT_PREFIX,
@@ -292,13 +293,14 @@ class RunCallbacks(NamedTuple):
     progress: ProgressCallback
 
 
-def make_callbacks(settings: TrainSettings, eval_env, clock: RunClock,
-                   off_policy: bool) -> RunCallbacks:
+def make_callbacks(settings: TrainSettings, eval_env, clock: RunClock) -> RunCallbacks:
     """The evaluation, checkpoint and progress callbacks of a run.
 
-    ``clock`` keeps the run's wall time; ``off_policy`` saves the replay buffer with
-    each checkpoint (SAC).
+    ``clock`` keeps the run's wall time; an off-policy algorithm (its row of
+    :mod:`tether_gym_agents.common.algorithms`) saves its replay buffer with each
+    checkpoint.
     """
+    off_policy = not algorithm(settings.algo).on_policy
     checkpoints = RunCheckpointCallback(
         save_freq=max(settings.checkpoint_freq // settings.n_envs, 1),
         save_path=str(settings.out / CHECKPOINT_DIR), name_prefix=CHECKPOINT_PREFIX,

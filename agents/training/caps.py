@@ -34,7 +34,7 @@ from stable_baselines3 import SAC
 from stable_baselines3.common.utils import polyak_update
 from torch.nn import functional as F
 
-from ..files.safe_format import SB3_CONTRIB_PIP
+from ..common.algorithms import ALGORITHMS
 
 __all__ = ["CapsMixin", "CapsSAC", "caps_tqc_class", "smoothness_terms"]
 
@@ -243,7 +243,8 @@ def caps_tqc_class():
         from sb3_contrib import TQC
         from sb3_contrib.common.utils import quantile_huber_loss
     except ImportError as exc:
-        raise ImportError(f"--algo tqc needs sb3-contrib: {SB3_CONTRIB_PIP}") from exc
+        tqc = ALGORITHMS["tqc"]
+        raise ImportError(f"--algo tqc needs {tqc.requirement}: {tqc.install()}") from exc
 
     class CapsTQC(CapsMixin, TQC):  # type: ignore[misc]  # mypy sees CapsMixin as SAC
         """sb3-contrib's TQC with the CAPS penalties of :class:`CapsMixin`."""

@@ -9,12 +9,13 @@ the file, the key and the valid values.
 from __future__ import annotations
 
 import difflib
-import inspect
+import importlib
 import math
 from pathlib import Path
 
 import gymnasium as gym
 
+from ..common.algorithms import algorithm, split_name
 from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from ..common.features import FeatureSpec
 from ..common.jsonio import to_jsonable
@@ -25,11 +26,18 @@ from .hyperparams import activation_class, check_hyperparams
 __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_KEYS",
            "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
-           "check_env_id", "algo_class", "check_algo_params", "fit_rollout"]
+           "check_env_id", "algo_class", "check_algo_params", "fit_rollout", "NOISE_TYPES",
+           "NOISE_STD_MAX", "action_noise"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
-            "checkpoint_freq", "residual", "features")
+            "checkpoint_freq", "residual", "features", "noise_type", "noise_std")
+NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
+"""``noise_type`` values (rl-baselines3-zoo's names): Gaussian or Ornstein-Uhlenbeck noise
+of standard deviation ``noise_std`` on every action entry, in the policy's action box
+[-1, 1], for the algorithms whose row says ``action_noise`` (SAC, TQC, TD3)."""
+NOISE_STD_MAX = 1.0
+"""Largest ``noise_std``: the half width of the policy's action box [-]."""
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
 
 # A fixed value the user types clears the config's random range of the same quantity.
@@ -90,10 +98,11 @@ def fit_rollout(params: dict, algo: str, n_envs: int, timesteps: int
     inside a rollout: a budget below one rollout would train a whole rollout (2048
     steps for ``--timesteps 64`` with SB3's defaults). Such a run collects rollouts of
     ``n_steps = ceil(timesteps / n_envs)`` (at least 2 env steps) instead, with
-    ``batch_size`` at most the rollout. SAC (``learning_starts`` at or above the budget:
-    no gradient step) is only noted. Returns ``(params, None)`` when nothing changes.
+    ``batch_size`` at most the rollout. An off-policy algorithm (``learning_starts`` at or
+    above the budget: no gradient step) is only noted. Returns ``(params, None)`` when
+    nothing changes.
     """
-    if algo != "ppo":
+    if not algorithm(algo).on_policy:
         starts = params.get("learning_starts", 100)
         if isinstance(starts, int) and starts >= timesteps:
             return params, (f"--timesteps {timesteps} <= learning_starts {starts}: "
@@ -112,36 +121,68 @@ def fit_rollout(params: dict, algo: str, n_envs: int, timesteps: int
 
 
 def check_algo_params(params: dict, algo: str, source: str) -> None:
-    """Raise ConfigError for the first hyperparameter value PPO/SAC would reject.
+    """Raise ConfigError for the first hyperparameter value the algorithm would reject.
 
     ``params`` are a config's keys as read (``policy`` included); every value is
-    checked before any env or model is built (:mod:`.hyperparams`).
+    checked before any env or model is built (:mod:`.hyperparams`; the action noise
+    here).
     """
     try:
         check_hyperparams(params, algo, source, params.get("policy"))
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
+    _check_noise(params, algo, source)
+
+
+def _check_noise(params: dict, algo: str, source: str) -> None:
+    """``noise_type`` and ``noise_std``: both or neither, in range, for an off-policy row."""
+    given = [k for k in ("noise_type", "noise_std") if k in params]
+    if not given:
+        return
+    row = algorithm(algo)
+    if not row.action_noise:
+        raise ConfigError(f"{source}: {given[0]}: {algo.upper()} takes no action noise; "
+                          "remove noise_type and noise_std")
+    if len(given) == 1:
+        missing = "noise_std" if given[0] == "noise_type" else "noise_type"
+        raise ConfigError(f"{source}: {given[0]} needs {missing} (give both, or neither for "
+                          "no action noise)")
+    kind, std = params["noise_type"], params["noise_std"]
+    if kind not in NOISE_TYPES:
+        raise ConfigError(f"{source}: noise_type: {kind!r} must be one of {list(NOISE_TYPES)}")
+    if isinstance(std, bool) or not isinstance(std, (int, float)) or not math.isfinite(std) \
+            or not 0 <= std <= NOISE_STD_MAX:
+        raise ConfigError(f"{source}: noise_std: {std!r} must be a number in [0, "
+                          f"{NOISE_STD_MAX}] (in the policy's action box [-1, 1])")
+
+
+def action_noise(run: dict, n_actions: int):
+    """The SB3 ``ActionNoise`` of a run's checked ``noise_type``/``noise_std``; None if absent."""
+    if "noise_type" not in run:
+        return None
+    import numpy as np
+    from stable_baselines3.common.noise import NormalActionNoise, OrnsteinUhlenbeckActionNoise
+
+    cls = NormalActionNoise if run["noise_type"] == "normal" else OrnsteinUhlenbeckActionNoise
+    return cls(mean=np.zeros(n_actions), sigma=float(run["noise_std"]) * np.ones(n_actions))
 
 
 def algo_class(algo: str):
-    """The class that trains ``algo`` (``"ppo"``, ``"sac"`` or ``"tqc"``).
+    """The class that trains ``algo``: its row's ``model`` (:mod:`..common.algorithms`).
 
-    stable-baselines3's PPO for ``"ppo"``; for ``"sac"``
+    stable-baselines3's PPO and TD3 for ``"ppo"`` and ``"td3"``; for ``"sac"``
     :class:`~tether_gym_agents.training.caps.CapsSAC`, which is SAC step for step unless
     a config sets its ``caps_*`` smoothness weights; for ``"tqc"`` likewise CapsTQC on
-    sb3-contrib's TQC (a ConfigError with the pip command when sb3-contrib is missing,
-    before any work).
+    sb3-contrib's TQC. A library that is not installed is a ConfigError with the pip
+    command of the row's extra, before any work.
     """
-    from stable_baselines3 import PPO
-
-    from .caps import CapsSAC, caps_tqc_class
-
-    if algo == "tqc":
-        try:
-            return caps_tqc_class()
-        except ImportError as exc:
-            raise ConfigError(str(exc)) from None
-    return {"ppo": PPO, "sac": CapsSAC}[algo]
+    row = algorithm(algo)
+    module, name = split_name(row.model)
+    try:
+        return getattr(importlib.import_module(module), name)
+    except ImportError:
+        raise ConfigError(f"--algo {row.name} needs {row.requirement}: {row.install()}"
+                          ) from None
 
 
 def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
@@ -172,10 +213,11 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
         raise ConfigError(f"{path} must map env ids (and 'default') to hyperparameters")
     params = dict(doc.get("default") or {})
     params.update(doc.get(env_id) or {})
-    valid_algo = set(inspect.signature(algo_class(algo).__init__).parameters) - {
-        "self", "env", "policy", "_init_setup_model", "tensorboard_log", "verbose", "seed",
-        "device"}
-    valid = set(RUN_KEYS) | valid_algo
+    algo_class(algo)  # a missing library is reported before the file is read further
+    row = algorithm(algo)
+    valid = set(RUN_KEYS) | set(row.hyperparams)
+    if not row.action_noise:
+        valid -= {"noise_type", "noise_std"}
     unknown = sorted(set(params) - valid)
     if unknown:
         raise ConfigError(f"unknown key(s) {unknown} in {path} for {algo.upper()}; valid keys: "

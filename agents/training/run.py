@@ -18,6 +18,7 @@ from pathlib import Path
 
 import tether_gym
 
+from ..common.algorithms import algorithm
 from ..files.run_folder import (
     FINAL_AGENT_DIR,
     FINAL_MODEL_FILE,
@@ -33,7 +34,7 @@ from ..files.run_folder import (
     write_args,
     write_config,
 )
-from .config import algo_class, with_schedules
+from .config import action_noise, algo_class, with_schedules
 from .settings import TrainSettings
 
 __all__ = ["RunSummary", "train", "make_venv", "evaluate_command"]
@@ -128,7 +129,7 @@ def train(settings: TrainSettings) -> RunSummary:
     clock.write("running", int(previous.get("num_timesteps", 0)))
     model, venv, eval_env = _model(settings)
     _write_records(settings)
-    callbacks = make_callbacks(settings, eval_env, clock, hasattr(model, "replay_buffer"))
+    callbacks = make_callbacks(settings, eval_env, clock)
     if settings.resume:  # the learning curve continues, not restarts
         _continue_curve(callbacks.evaluator, out, int(model.num_timesteps))
     t0 = time.perf_counter()
@@ -139,7 +140,7 @@ def train(settings: TrainSettings) -> RunSummary:
     env = model.get_env()
     if isinstance(env, VecNormalize):
         save_stats(env, out / VECNORMALIZE_FILE)  # .pkl and the .npz that resume reads
-    if hasattr(model, "replay_buffer"):
+    if not algorithm(settings.algo).on_policy:
         save_buffer(model, out / REPLAY_BUFFER_FILE)
     save_model(model, out / FINAL_MODEL_FILE)  # last: a final model has its other files
     save_safe_agent(settings, model, env, FINAL_AGENT_DIR, wall_time_s=clock.elapsed())
@@ -231,11 +232,18 @@ def _normalized(settings: TrainSettings, venv, eval_env):
 
 
 def _new_model(settings: TrainSettings, venv):
-    """A new model of the run's algorithm and hyperparameters on ``venv``."""
+    """A new model of the run's algorithm and hyperparameters on ``venv``.
+
+    The config's ``noise_type``/``noise_std`` become the model's ``action_noise``.
+    """
+    params = with_schedules(settings.hyperparams)
+    noise = action_noise(settings.run, int(venv.action_space.shape[0]))
+    if noise is not None:
+        params["action_noise"] = noise
     return algo_class(settings.algo)(
         settings.run.get("policy", "MlpPolicy"), venv, seed=settings.seed, device="cpu",
         tensorboard_log=str(settings.out / TB_DIR), verbose=settings.options.verbose,
-        **with_schedules(settings.hyperparams))
+        **params)
 
 
 def _resumed_model(settings: TrainSettings, venv, eval_env):
