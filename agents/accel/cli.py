@@ -19,10 +19,12 @@ import time
 from dataclasses import fields
 from pathlib import Path
 
+from ..common.yamlio import MAX_YAML_BYTES
+
 __all__ = ["main", "read_config", "DEFAULT_CONFIG"]
 
 DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "gpu_ppo.yml"
-MAX_CONFIG_BYTES = 1 << 20
+MAX_CONFIG_BYTES = MAX_YAML_BYTES
 """A config file larger than this [bytes] is refused before it is parsed."""
 MAX_SEEDS = 64
 MAX_ENVS = 1 << 22
@@ -64,23 +66,16 @@ def read_config(path: Path) -> tuple:
     ``env_kwargs``; unknown keys, values out of range and files that are not small plain
     YAML (aliases included) raise GpuConfigError.
     """
-    import yaml
-
+    from ..common.yamlio import YamlFileError, load_yaml_file
     from .ppo import PPOSettings
 
     path = Path(path)
-    if not path.is_file():
-        raise GpuConfigError(f"config {path} is not a regular file")
-    if path.stat().st_size > MAX_CONFIG_BYTES:
-        raise GpuConfigError(f"config {path} is larger than {MAX_CONFIG_BYTES} bytes")
-    try:
-        text = path.read_text()
-        # an alias can expand a small file into a huge document: refuse them unparsed
-        if any(isinstance(event, yaml.AliasEvent) for event in yaml.parse(text)):
-            raise GpuConfigError(f"config {path}: YAML anchors and aliases are not accepted")
-        doc = yaml.safe_load(text)
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
-        raise GpuConfigError(f"config {path} is not readable YAML: {exc}") from None
+    try:  # a regular file of at most MAX_CONFIG_BYTES, no aliases, bounded depth
+        doc = load_yaml_file(path, what="config", max_bytes=MAX_CONFIG_BYTES)
+    except YamlFileError as exc:
+        why = str(exc).removeprefix(f"config {path}").lstrip(": ").removeprefix(
+            "not valid YAML: ")
+        raise GpuConfigError(f"config {path} is not readable YAML: {why}") from None
     import tether_gym
 
     if not isinstance(doc, dict) or set(doc) != {tether_gym.ENV_ID} \

@@ -14,7 +14,10 @@ Besides the built-in suites (:data:`SUITES`), a suite can be a YAML file::
         env_kwargs: {masses: [1.2, 1.6]}
         nominal: {masses: [1.0, 2.0], eccentricity: 0.2}
 
-read with ``yaml.safe_load`` (no code is executed; lists become tuples).
+read with :func:`~tether_gym_agents.common.yamlio.load_yaml_file` (no code is executed;
+no anchors or aliases; at most 256 KiB; lists become tuples). The ``nominal`` values are
+checked as the env checks them (masses > 0, 0 <= e < 1, reel_time_constant and
+accel_limit > 0) when the file is read.
 
 **Any number of bodies.** Scenarios are written for the env's default chain (the
 paper's, :data:`WRITTEN_FOR` = 3 bodies, 2 tethers); :meth:`Scenario.for_bodies` gives
@@ -266,15 +269,10 @@ def _tuples(value):
 
 def load_suite_file(path) -> tuple[Scenario, ...]:
     """Scenarios of a YAML suite file (format in the module docstring)."""
-    import yaml
+    from ..common.yamlio import load_yaml_file
 
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"suite file {str(path)!r} does not exist")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ValueError(f"suite file {path}: not valid YAML: {exc}") from None
+    data = load_yaml_file(path, what="suite file")  # a YamlFileError (ValueError)
     if isinstance(data, dict):
         unknown = sorted(set(data) - {"scenarios"})
         if unknown:
@@ -299,6 +297,9 @@ def load_suite_file(path) -> tuple[Scenario, ...]:
         if name in seen:
             raise ValueError(f"{where}: duplicate scenario name {name!r}")
         seen.add(name)
+        if not isinstance(item.get("description", ""), str):
+            raise ValueError(f"{where} ({name}): 'description' must be a string, got "
+                             f"{type(item['description']).__name__}")
         env_kwargs = item.get("env_kwargs") or {}
         if not isinstance(env_kwargs, dict) or not all(isinstance(key, str)
                                                        for key in env_kwargs):
@@ -309,9 +310,24 @@ def load_suite_file(path) -> tuple[Scenario, ...]:
                                     or not set(nominal) <= set(NOMINAL_KEYS)):
             raise ValueError(f"{where} ({name}): 'nominal' must be a mapping of one or "
                              f"more of the keys {list(NOMINAL_KEYS)}, got {nominal!r}")
+        if nominal is not None:
+            _check_nominal(nominal, f"{where} ({name})")
         out.append(Scenario(name, str(item.get("description", "")), _tuples(env_kwargs),
                             _tuples(nominal)))
     return tuple(out)
+
+
+def _check_nominal(nominal: dict, where: str) -> None:
+    """Raise ValueError unless the nominal model's values are ones the env accepts."""
+    from tether_gym.envs import EnvConfig
+    from tether_gym.params import check_masses
+
+    try:
+        if "masses" in nominal:
+            check_masses(nominal["masses"])
+        EnvConfig.from_kwargs(**{k: v for k, v in nominal.items() if k != "masses"})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: nominal {exc}") from None
 
 
 def describe_suites() -> str:

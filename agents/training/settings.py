@@ -351,12 +351,13 @@ def _read_params(options: TrainOptions, out: Path) -> tuple[dict, str]:
     resolved = out / CONFIG_FILE
     if not resolved.is_file():
         raise ConfigError(f"--resume: {resolved} not found (is {out} a run folder?)")
-    import yaml
+    import yaml  # until files.run_folder.read_config raises YamlFileError (ValueError) only
 
     try:
         saved = read_config(out)
-    except (OSError, yaml.YAMLError) as exc:
-        raise ConfigError(f"--resume: {resolved} cannot be read: {exc}") from None
+    except (OSError, ValueError, yaml.YAMLError, RecursionError) as exc:
+        message = " ".join(str(exc).split())
+        raise ConfigError(f"--resume: {resolved} cannot be read: {message}") from None
     if not isinstance(saved, dict):
         raise ConfigError(f"--resume: {resolved} is not a mapping of run settings")
     if saved.get("algo") not in (None, options.algo):

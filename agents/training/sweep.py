@@ -12,7 +12,8 @@ goes to ``sweep_results.md`` and ``sweep_results.csv`` in ``--out`` and to the s
 Ranking on one seed per trial picks lucky seeds, not good settings (the trap of
 rl-baselines3-zoo's tuner, its issues #204 and #151): ``seeds_per_trial`` is at least 2.
 
-Sweep file (YAML, read with ``yaml.safe_load``; unknown keys are rejected)::
+Sweep file (YAML, read with ``common.yamlio.load_yaml_file``: a regular file of at most
+256 KiB, no anchors or aliases; unknown keys are rejected)::
 
     search: grid            # grid (every combination) | random | optuna
     seeds_per_trial: 3      # seeds --seed ... --seed+n-1 per trial, >= 2 (default 3)
@@ -138,7 +139,7 @@ def _int(doc, key, default, low, path):
 
 
 def load_sweep(path: Path) -> SweepSpec:
-    """Read and validate a sweep file (``yaml.safe_load``: no code is run).
+    """Read and validate a sweep file (:func:`~..common.yamlio.load_yaml_file`: no code is run).
 
     Raises
     ------
@@ -146,15 +147,13 @@ def load_sweep(path: Path) -> SweepSpec:
         On a missing or malformed file, an unknown key, a bad distribution, a grid over
         a continuous distribution or ``seeds_per_trial < 2``.
     """
-    import yaml
+    from ..common.yamlio import YamlFileError, load_yaml_file
 
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"--sweep file {str(path)!r} does not exist")
     try:
-        doc = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise ConfigError(f"--sweep {path} is not valid YAML: {exc}") from exc
+        doc = load_yaml_file(path, what="--sweep file")
+    except YamlFileError as exc:
+        raise ConfigError(str(exc)) from None
     if not isinstance(doc, dict):
         raise ConfigError(f"--sweep {path} must be a mapping with keys {list(FILE_KEYS)}")
     unknown = sorted(set(doc) - set(FILE_KEYS))
