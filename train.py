@@ -1,4 +1,4 @@
-"""Train a PPO or SAC agent on tether_gym: ``python train.py --help``."""
+"""Train an agent (PPO, SAC, TQC or TD3) on tether_gym: ``python train.py --help``."""
 import sys
 
 from tether_gym_agents.cli.train import main

@@ -69,9 +69,10 @@ def main(argv=None) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``train.py`` (its options are the fields of TrainOptions)."""
-    p = argparse.ArgumentParser(prog="train.py", description="Train PPO or SAC on tether_gym.")
+    p = argparse.ArgumentParser(prog="train.py", description="Train an agent on tether_gym.")
     p.add_argument("--algo", choices=ALGOS, default="ppo",
-                   help="ppo, sac, or tqc (sb3-contrib's TQC: pip install sb3-contrib)")
+                   help=f"one of {', '.join(ALGOS)} (tqc needs sb3-contrib: pip install -e "
+                        "\".[tqc]\" in a clone)")
     p.add_argument("--env-id", default=tether_gym.ENV_ID)
     p.add_argument("--env-kwargs", nargs="*", default=[], metavar="KEY=VALUE",
                    help="env arguments as Python literals, e.g. eccentricity=0.3 "
