@@ -21,6 +21,12 @@ over the scenarios).
 ``curves.png``. A folder that holds a ``curves.json`` this command wrote (and no seed runs)
 is read instead of evaluated (:func:`load_curves`), so curves evaluated separately, for
 example one policy per core, are put side by side without evaluating them again.
+
+**Files read.** Each checkpoint agent folder is copied for the evaluation only from its
+regular files (:func:`~tether_gym_agents.files.folder_paths.copy_tree_checked`): a
+symlink leading out of it (to ``/dev/zero``, to another agent), a FIFO or a file over
+its size cap is a ``ValueError`` naming it, before anything is evaluated; a checkpoint
+folder, ``checkpoints/`` or ``seed_K`` symlinked outside its run folder too.
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files.folder_paths import copy_tree_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
 from ..files.safe_format import AGENT_FILE
 from .benchmark import EvalOptions, evaluate
@@ -72,7 +79,8 @@ def curve_points(folder: Path) -> list[tuple[int, list[tuple[Path, float]]]]:
     for run in runs:
         points = {}
         for steps, agent in checkpoint_agents(run):
-            training = json.loads((agent / AGENT_FILE).read_text()).get("training", {})
+            meta = json.loads(file_inside(agent, agent / AGENT_FILE).read_text())
+            training = meta.get("training", {}) if isinstance(meta, dict) else {}
             points[steps] = (agent, float(training.get("wall_time_s", math.nan)))
         per_run.append(points)
     common = sorted(set.intersection(*(set(p) for p in per_run))) if per_run else []
@@ -98,7 +106,7 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
     try:
         for k, (steps, agents) in enumerate(points, 1):
             for i, (agent, _) in enumerate(agents):  # one policy, one run per seed
-                shutil.copytree(agent, tmp / f"step_{steps}" / f"seed_{i}")
+                copy_tree_checked(agent, tmp / f"step_{steps}" / f"seed_{i}")
             res = evaluate([str(tmp / f"step_{steps}")], suite, n_seeds, 0,
                            options=EvalOptions(out=None, plots=False, log=None))
             out.append(_point(res, steps, [w for _, w in agents]))
@@ -129,7 +137,7 @@ def load_curves(folder: Path, suite: str, n_seeds: int,
     is not a list of curves.
     """
     path = Path(folder) / CURVES_FILE
-    curves = json.loads(path.read_text())
+    curves = json.loads(file_inside(folder, path).read_text())
     if not (isinstance(curves, list) and all(isinstance(c, dict) and "points" in c
                                             for c in curves)):
         raise ValueError(f"{path} is not a curves.json written by evaluate.py curves")

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 from .export import convert_run, export_runs
+from .folder_paths import FolderFileError
 from .safe_format import AGENT_FILE, WEIGHTS_FILE, AgentLoadError
 
 __all__ = ["main", "PROG"]
@@ -45,7 +46,7 @@ def main(argv=None) -> int:
             print(f"exported {len(written)} run(s) to {args.dest}")
             return 0
         out = convert_run(args.run, args.out, allow_pickle=args.allow_pickle)
-    except AgentLoadError as exc:
+    except (AgentLoadError, FolderFileError) as exc:
         print(f"agent_files: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out / AGENT_FILE} and {out / WEIGHTS_FILE}")

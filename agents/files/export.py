@@ -1,10 +1,24 @@
-"""Share trained runs: copy their safe files, or convert a pickled run to a safe agent."""
+"""Share trained runs: copy their safe files, or convert a pickled run to a safe agent.
+
+**What an export reads and writes.** :func:`export_runs` copies only regular files
+inside the source folder, each under its size cap
+(:func:`~.folder_paths.file_inside`; a symlink whose target stays inside is copied as
+the file it points to). It refuses a file with more than one name (a **hard link**,
+``st_nlink > 1``): the other name may be anywhere on the same file system (a secret of
+the user's, linked into a folder received from someone else), and the folder's own files
+are never hard links (``train.py`` writes each one new); copy the file (``cp``) to export
+it. It writes only into folders it creates or that already are real folders inside the
+destination: a symlinked ``DEST/eval`` (or any symlink below ``DEST``) is refused, never
+written through, and a symlink at a destination file name is replaced, not followed.
+Every check is made before anything is written.
+"""
 
 from __future__ import annotations
 
 import shutil
 from pathlib import Path
 
+from .folder_paths import FolderFileError, real_folder
 from .pickled import load_pickled_run, run_features, run_hybrid
 from .run_folder import (
     ARGS_FILE,
@@ -44,16 +58,19 @@ def export_runs(src, dest) -> list[Path]:
 
     Only :data:`EXPORTED_FILES` (and the folder's :data:`EXPORTED_FOLDER_FILES`) are
     copied; every run must hold a safe agent (``agent.json`` + ``policy.safetensors``).
-    Every file to copy must be a regular file inside ``src`` (a symlink whose target
-    stays inside ``src`` is copied as the file it points to); all are checked before
-    anything is written, and a symlink at a destination name is replaced, never written
-    through. Returns the run folders written.
+    Every file to copy must be a regular file inside ``src`` under its size cap, with no
+    other name (no hard link); a symlink whose target stays inside ``src`` is copied as
+    the file it points to. Folders are written only where they are real folders below
+    ``dest`` (module docstring); all is checked before anything is written, and a
+    symlink at a destination name is replaced, never written through. Returns the run
+    folders written.
 
     Raises
     ------
     AgentLoadError
-        Naming a run without a safe agent, or a file that leads outside ``src`` or is
-        not a regular file (a symlink to ``/etc/passwd``, a FIFO): nothing is copied then.
+        Naming a run without a safe agent, a file that leads outside ``src``, is not a
+        regular file (a symlink to ``/etc/passwd``, a FIFO), is over its cap or is a
+        hard link, or a symlinked folder below ``dest``: nothing is copied then.
     """
     src, dest = Path(src), Path(dest)
     runs = seed_runs(src)
@@ -66,14 +83,38 @@ def export_runs(src, dest) -> list[Path]:
     if runs:
         copies += [(src / name, dest / name) for name in EXPORTED_FOLDER_FILES]
     copies = [(a, b) for a, b in copies if a.exists() or a.is_symlink()]
-    for source, _ in copies:
-        checked_file(src, source)
     for source, target in copies:
-        target.parent.mkdir(parents=True, exist_ok=True)
+        checked_file(src, source)
+        if source.stat().st_nlink > 1:
+            raise AgentLoadError(f"{source} is a hard link ({source.stat().st_nlink} names "
+                                 "for one file, the others possibly outside the folder); "
+                                 "export copies only files of their own: copy it (cp) "
+                                 "first if it is yours to share")
+        _real_parent(dest, target, make=False)
+    for source, target in copies:
+        _real_parent(dest, target, make=True)
         if target.is_symlink():
             target.unlink()
-        shutil.copy2(source, target)
+        shutil.copyfile(source, target)
+        shutil.copystat(source, target)
     return [out for _, out in pairs]
+
+
+def _real_parent(dest: Path, target: Path, make: bool) -> None:
+    """Check (and with ``make`` create) ``target``'s folder: no symlink below ``dest``."""
+    relative = target.parent.relative_to(dest)
+    if not make:  # check only: each existing part must be a real folder
+        folder = dest
+        for part in relative.parts:
+            folder = folder / part
+            if folder.is_symlink() or (folder.exists() and not folder.is_dir()):
+                raise AgentLoadError(f"{folder} is a symlink or not a folder; export writes "
+                                     "only into real folders inside the destination")
+        return
+    try:
+        real_folder(dest, relative)
+    except FolderFileError as exc:
+        raise AgentLoadError(str(exc)) from None
 
 
 def convert_run(path, out=None, allow_pickle: bool = False) -> Path:

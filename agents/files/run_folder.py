@@ -68,6 +68,7 @@ from typing import Any
 import numpy as np
 
 from ..common.jsonio import to_jsonable
+from .folder_paths import FolderFileError, file_inside, folder_inside
 from .safe_format import AGENT_FILE
 
 __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_DIR",
@@ -79,7 +80,8 @@ __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_
            "last_write_time", "evaluation_arrays", "evaluation_rows", "write_text_atomic",
            "yaml_text", "write_train_info",
            "read_train_info", "trained_steps", "write_config", "read_config", "write_args",
-           "append_command", "evaluations_path", "read_evaluations", "write_evaluations",
+           "append_command", "check_command_file", "evaluations_path", "read_evaluations",
+           "write_evaluations",
            "saved_models", "checkpoint_steps", "checkpoint_agents", "seed_dir", "seed_runs",
            "prune_checkpoint_buffers"]
 
@@ -180,10 +182,13 @@ def read_train_info(run: Path) -> dict:
     Raises
     ------
     ValueError
-        When the file is not valid JSON.
+        When the file is not valid JSON, or not a regular file inside the run folder of
+        at most 1 MiB (:class:`~.folder_paths.FolderFileError`).
     """
     path = Path(run) / TRAIN_INFO_FILE
-    return json.loads(path.read_text()) if path.is_file() else {}
+    if not (path.exists() or path.is_symlink()):
+        return {}
+    return json.loads(file_inside(run, path).read_text())
 
 
 def trained_steps(run: Path) -> int:
@@ -208,10 +213,16 @@ def read_config(run: Path) -> dict:
         When the run has no ``config.yml``.
     yaml.YAMLError
         When it is not valid YAML.
+    FolderFileError
+        When it is not a regular file inside the run folder of at most 1 MiB (a link
+        leading out, a FIFO).
     """
     import yaml
 
-    return yaml.safe_load((Path(run) / CONFIG_FILE).read_text()) or {}
+    path = Path(run) / CONFIG_FILE
+    if path.exists() or path.is_symlink():
+        file_inside(run, path)
+    return yaml.safe_load(path.read_text()) or {}
 
 
 def write_args(run: Path, args: dict) -> None:
@@ -220,10 +231,34 @@ def write_args(run: Path, args: dict) -> None:
 
 
 def append_command(run: Path, command: str) -> None:
-    """Add a line to ``command.txt`` (the file is rewritten atomically)."""
+    """Add a line to ``command.txt`` (the file is rewritten atomically).
+
+    Raises
+    ------
+    FolderFileError
+        When ``command.txt`` is a symlink (wherever it leads), a hard link (another name
+        for the same file exists), not a regular file or over 1 MiB: rewriting it would
+        copy what it points to into the run folder, which an export then ships.
+    """
+    check_command_file(run)
     path = Path(run) / COMMAND_FILE
-    before = path.read_text() if path.is_file() else ""
+    before = path.read_text() if path.exists() else ""
     write_text_atomic(path, before + command + "\n")
+
+
+def check_command_file(run: Path) -> None:
+    """Refuse a ``command.txt`` that :func:`append_command` must not rewrite (its Raises)."""
+    path = Path(run) / COMMAND_FILE
+    if path.is_symlink():
+        raise FolderFileError(f"{path} is a symlink (to {path.resolve()}); a run's "
+                              f"{COMMAND_FILE} must be a regular file, it is rewritten "
+                              "and exported")
+    if path.exists():
+        file_inside(run, path)
+        if path.stat().st_nlink > 1:
+            raise FolderFileError(f"{path} is a hard link ({path.stat().st_nlink} names for "
+                                  f"one file); a run's {COMMAND_FILE} must be a file of its "
+                                  "own, it is rewritten and exported")
 
 
 # ---------------------------------------------------------------------- evaluations
@@ -244,13 +279,18 @@ def read_evaluations(run: Path) -> dict[str, np.ndarray] | None:
     Raises
     ------
     DamagedFileError
-        When the file is not a readable npz (cut short) or lacks one of the arrays
+        When the file is not a readable npz (cut short), not a regular file inside the run
+        folder (a link leading out, a FIFO) or over its size cap, or lacks one of the arrays
         ``timesteps``, ``results``, ``ep_lengths``, or their lengths differ; the
         message names the file.
     """
     path = evaluations_path(run)
-    if not path.is_file():
+    if not (path.exists() or path.is_symlink()):
         return None
+    try:
+        file_inside(run, path)
+    except FolderFileError as exc:
+        raise DamagedFileError(str(exc)) from None
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
@@ -346,11 +386,15 @@ class SavedModel:
 
 
 def saved_models(run: Path) -> list[SavedModel]:
-    """The final model (if any), then every checkpoint ``model_<N>_steps.zip``."""
+    """The final model (if any), then every checkpoint ``model_<N>_steps.zip``.
+
+    Whatever is at those names is listed (a folder, a FIFO, a link): the readers check
+    each with :func:`~.folder_paths.file_inside` before opening it.
+    """
     run = Path(run)
     found = []
     final = run / FINAL_MODEL_FILE
-    if final.is_file():
+    if final.exists() or final.is_symlink():  # a FIFO too: the reader refuses it, by name
         found.append(SavedModel(final, run / VECNORMALIZE_FILE, run / REPLAY_BUFFER_FILE, None))
     prefix = CHECKPOINT_PREFIX
     for ckpt in (run / CHECKPOINT_DIR).glob(f"{prefix}_*_steps.zip"):
@@ -387,15 +431,25 @@ def checkpoint_agents(run: Path) -> list[tuple[int, Path]]:
     """``(N, folder)`` of every ``checkpoints/agent_<N>_steps/`` of a run, by N.
 
     A folder without its ``agent.json`` (a call killed while writing it) is left out.
+
+    Raises
+    ------
+    FolderFileError
+        When such a folder (or ``checkpoints/``) is a symlink leading outside the run
+        folder.
     """
     folder = Path(run) / CHECKPOINT_DIR
     if not folder.is_dir():
         return []
+    folder_inside(run, folder)
     found = []
     for path in folder.iterdir():
         match = _STEPS_IN_NAME.search(path.name)
-        if (match and path.name.startswith(CHECKPOINT_AGENT_PREFIX + "_")
-                and (path / AGENT_FILE).is_file()):
+        if not (match and path.name.startswith(CHECKPOINT_AGENT_PREFIX + "_")):
+            continue
+        if path.is_symlink():
+            folder_inside(run, path)
+        if (path / AGENT_FILE).exists() or (path / AGENT_FILE).is_symlink():
             found.append((int(match.group(1)), path))
     return sorted(found)
 
@@ -423,10 +477,18 @@ def seed_runs(folder) -> list[Path]:
 
     The layout that ``train.py --seeds N`` writes and that the evaluation reads as one
     policy with one run per seed.
+
+    Raises
+    ------
+    FolderFileError
+        When a ``seed_K`` is a symlink leading outside ``folder`` (to another run).
     """
     folder = Path(folder)
     if not folder.is_dir():
         return []
     found = [(int(m.group(1)), p) for p in folder.iterdir()
-             if p.is_dir() and (m := _SEED_DIR.match(p.name))]
-    return [p for _, p in sorted(found)]
+             if (m := _SEED_DIR.match(p.name)) and (p.is_dir() or p.is_symlink())]
+    for _, path in found:
+        if path.is_symlink():
+            folder_inside(folder, path)
+    return [p for _, p in sorted(found) if p.is_dir()]

@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..common.features import FeatureSpec, add_features
+from .folder_paths import FolderFileError, file_inside, folder_inside
 from .mlp import NumpyMLP
 from .pickled import is_pickled_run, load_pickled_run, run_features, run_hybrid
 from .run_folder import CONFIG_FILE, FINAL_AGENT_DIR, read_config, seed_runs
@@ -43,7 +44,14 @@ RUN_AGENT_DIRS = (FINAL_AGENT_DIR,)
 
 
 def find_unit(path) -> Path | None:
-    """The safe agent folder that ``path`` designates, or None when there is none."""
+    """The safe agent folder that ``path`` designates, or None when there is none.
+
+    Raises
+    ------
+    AgentLoadError
+        When a run folder's ``final_agent/`` is a symlink leading outside the run folder
+        (evaluating it would evaluate another agent than the run's).
+    """
     path = Path(path)
     if path.is_file():
         if path.name in (AGENT_FILE, WEIGHTS_FILE):
@@ -52,6 +60,11 @@ def find_unit(path) -> Path | None:
     if is_unit(path):
         return path
     for sub in RUN_AGENT_DIRS:
+        if (path / sub).is_symlink():
+            try:
+                folder_inside(path, path / sub)
+            except FolderFileError as exc:
+                raise AgentLoadError(str(exc)) from None
         if is_unit(path / sub):
             return path / sub
     return None
@@ -68,7 +81,7 @@ def hybrid_of(path) -> dict | None:
     unit = find_unit(path)
     try:
         if unit is not None:
-            meta = json.loads((unit / AGENT_FILE).read_text())
+            meta = json.loads(file_inside(unit, unit / AGENT_FILE).read_text())
             return meta.get("hybrid") if isinstance(meta, dict) else None
         run = path if path.is_dir() else path.parent
         if (run / CONFIG_FILE).is_file():

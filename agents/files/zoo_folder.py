@@ -30,6 +30,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from .folder_paths import FolderFileError, file_inside
+
 __all__ = ["ZOO_CONFIG_FILE", "ZOO_ARGS_FILE", "ZOO_STATS_FILE", "ZOO_BEST_MODEL_FILE",
            "ZooRun", "ZooFolderError", "find_zoo_run", "read_zoo_yaml", "zoo_config"]
 
@@ -117,7 +119,8 @@ def read_zoo_yaml(path: Path) -> dict:
     Raises
     ------
     ZooFolderError
-        If the file is not valid YAML, uses another Python tag, or is not a mapping.
+        If the file is not valid YAML, uses another Python tag, or is not a mapping, or
+        is not a regular file in its folder of at most 1 MiB (checked before opening).
     """
     import yaml
 
@@ -135,6 +138,10 @@ def read_zoo_yaml(path: Path) -> dict:
     _ZooLoader.add_constructor(_ORDERED_DICT_TAG, ordered_dict)
     _ZooLoader.add_constructor(_TUPLE_TAG,
                                lambda loader, node: tuple(loader.construct_sequence(node)))
+    try:
+        file_inside(Path(path).parent, path)
+    except FolderFileError as exc:
+        raise ZooFolderError(str(exc)) from None
     try:
         data = yaml.load(path.read_text(), Loader=_ZooLoader)  # noqa: S506 - safe subclass
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:

@@ -9,7 +9,14 @@ into a model rebuilt from the run's ``config.yml``; nothing is unpickled.
 
 The ``VecNormalize`` statistics and the replay buffer are written beside the pickled
 files as ``.npz`` arrays (:func:`save_stats_npz`, :func:`save_buffer_npz`; read with
-``allow_pickle=False``). Every file is written atomically.
+``allow_pickle=False``). Every file is written atomically. Every file is read only when it is
+a regular file under its size cap (:func:`~tether_gym_agents.files.folder_paths.file_inside`,
+checked before it is opened; :mod:`.resume` also checks that it lies inside the run folder).
+
+**Replay buffer of a checkpoint.** stable-baselines3 calls the checkpoint callback after
+the env step that reaches step N and before it adds that step's ``n_envs`` transitions
+to the buffer, so :func:`save_buffer_npz` at a checkpoint writes ``N - n_envs``
+transitions (the final save, after training, writes all of them); see :mod:`.resume`.
 """
 
 from __future__ import annotations
@@ -22,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import atomic_target
 
 __all__ = ["save_stats_npz", "load_stats_npz", "save_buffer_npz", "load_buffer_npz",
@@ -80,6 +88,7 @@ def load_zip_weights(model, path: Path) -> None:
     from stable_baselines3.common.save_util import recursive_setattr
 
     try:
+        _regular(path)
         with zipfile.ZipFile(path) as zf:
             data = json.loads(zf.read("data"))
             tensors = {name[: -len(".pth")]: torch.load(io.BytesIO(zf.read(name)),
@@ -92,9 +101,17 @@ def load_zip_weights(model, path: Path) -> None:
         model.num_timesteps = int(data["num_timesteps"])
         model._n_updates = int(data.get("_n_updates", 0))
         model._episode_num = int(data.get("_episode_num", 0))
+    except FolderFileError:
+        raise
     except (zipfile.BadZipFile, OSError, EOFError, KeyError, TypeError, RuntimeError,
             ValueError) as exc:
         raise ValueError(f"{path}: {type(exc).__name__}: {exc}") from None
+
+
+def _regular(path: Path) -> Path:
+    """``path`` if it is (or links to) a regular file under its size cap; nothing opened."""
+    path = Path(path)
+    return file_inside(path.resolve().parent, path)
 
 
 def _save_npz(path: Path, arrays: dict[str, Any]) -> None:
@@ -103,6 +120,7 @@ def _save_npz(path: Path, arrays: dict[str, Any]) -> None:
 
 
 def _load_npz(path: Path) -> dict[str, np.ndarray]:
+    _regular(path)
     try:
         with np.load(path, allow_pickle=False) as data:
             return {k: data[k] for k in data.files}

@@ -6,6 +6,24 @@ without unpickling anything (:mod:`.checkpoint`; pickled statistics and buffers 
 older runs only with ``--allow-pickle``, with a warning),
 keeps the evaluations and TensorBoard events up to that step and drops the later ones,
 which the resumed run repeats.
+
+**Files of the run folder.** Before anything is loaded, every file the resume reads
+(each saved model, its statistics and replay buffer, ``config.yml``, ``args.yml``,
+``train_info.json``, ``eval/evaluations.npz``, the TensorBoard events) must be a regular
+file inside the run folder under its size cap
+(:func:`~tether_gym_agents.files.folder_paths.file_inside`): a symlink leading out, a FIFO
+named like a checkpoint or a link to ``/dev/zero`` is a :class:`ConfigError` naming it
+(the command exits 2; nothing is opened, nothing is skipped silently). ``command.txt``,
+which the resumed run rewrites, must be a file of its own (no symlink, no hard link).
+
+**Replay buffers (SAC, TQC).** A checkpoint ``checkpoints/model_<N>_steps`` is written
+from stable-baselines3's callback, which runs after the env step that reaches step N and
+before that step's transitions are added to the buffer. Its buffer therefore holds
+``N - n_envs`` transitions (the last step's are missing), while ``final_model.zip``'s
+buffer (``final_replay_buffer``) holds all N. A run resumed from a checkpoint (a killed
+run) continues at step N with ``N - n_envs`` transitions: each such resume leaves out one
+vector step of experience (``n_envs`` of ``buffer_size`` transitions; the step count and
+the training budget are exact). ``train.py --resume`` prints the count it loaded.
 """
 
 from __future__ import annotations
@@ -18,11 +36,18 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import (
+    ARGS_FILE,
+    CONFIG_FILE,
     FINAL_MODEL_FILE,
+    TB_DIR,
+    TRAIN_INFO_FILE,
     SavedModel,
+    check_command_file,
     evaluation_arrays,
     evaluation_rows,
+    evaluations_path,
     read_evaluations,
     saved_models,
     write_evaluations,
@@ -31,7 +56,44 @@ from .checkpoint import load_buffer_npz, load_stats_npz, load_zip_weights, safe_
 from .config import ConfigError
 
 __all__ = ["PICKLE_RESUME_WARNING", "ResumeBuild", "resume_candidates", "load_resume_point",
-           "continue_eval_history", "truncate_tensorboard"]
+           "continue_eval_history", "truncate_tensorboard", "check_run_files"]
+
+
+def _present(path: Path) -> bool:
+    """Whether something (a file, a folder, a FIFO, a dangling link) is at ``path``."""
+    return path.exists() or path.is_symlink()
+
+
+def check_run_files(run_dir: Path) -> None:
+    """Check every file a resume reads (module docstring) before any is opened.
+
+    Raises
+    ------
+    ConfigError
+        Naming the first file that is not a regular file inside ``run_dir`` under its
+        size cap, or a ``command.txt`` that is a symlink or a hard link.
+    """
+    run_dir = Path(run_dir)
+    paths = [run_dir / name for name in (CONFIG_FILE, ARGS_FILE, TRAIN_INFO_FILE)]
+    paths.append(evaluations_path(run_dir))
+    for saved in saved_models(run_dir):
+        paths += [saved.model, saved.stats, safe_companion(saved.stats), saved.buffer,
+                  safe_companion(saved.buffer)]
+    tb_dir = run_dir / TB_DIR
+    if _present(tb_dir):
+        paths.append(tb_dir)
+        paths += sorted(tb_dir.rglob("events.out.tfevents.*"))
+    try:
+        for path in paths:
+            if path == tb_dir:
+                if not path.resolve().is_relative_to(run_dir.resolve()):
+                    raise FolderFileError(f"{path} leads outside {run_dir} (to "
+                                          f"{path.resolve()})")
+            elif _present(path):
+                file_inside(run_dir, path)
+        check_command_file(run_dir)
+    except FolderFileError as exc:
+        raise ConfigError(f"--resume: {exc}") from None
 
 
 def _zip_timesteps(path: Path) -> int | None:
@@ -103,8 +165,9 @@ def load_resume_point(run_dir: Path, build: ResumeBuild, venv, eval_env):
     ------
     ConfigError
         When no saved model loads (naming ``--allow-pickle`` when pickled ones were
-        refused).
+        refused), or a file of the run folder is refused (:func:`check_run_files`).
     """
+    check_run_files(run_dir)
     candidates = resume_candidates(run_dir)
     if not candidates:
         raise ConfigError(f"--resume: no checkpoint or {FINAL_MODEL_FILE} in {run_dir}")
