@@ -43,12 +43,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from .envs.config import env_config
 from .params import as_float_tuple, check_range
 from .physics import kernels
 from .physics.layout import at
 from .physics.state import PARAMS, STATE, P
 
-__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN", "env_config"]
+__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN"]
 
 DEFAULT_MARGIN = 0.5
 """Tension margin T^_min [-] when the configuration gives none: the reward's T_safe."""
@@ -74,30 +75,6 @@ class FilterResult(NamedTuple):
     """(B,) bool: the returned command satisfies every constraint (predicted)."""
     tension_min: np.ndarray
     """(B, n) predicted smallest T^ over the step under the returned command [-]."""
-
-
-def env_config(env: Any):
-    """The :class:`~tether_gym.envs.config.EnvConfig` of a TetherLibration env.
-
-    ``env`` is the env, wrapped or not, its vector env, a stable-baselines3 VecEnv of
-    it (its first sub-env's, by ``get_attr``), or any object whose ``config`` (or
-    ``unwrapped.config``) is an EnvConfig.
-
-    Raises
-    ------
-    TypeError
-        Naming the type of ``env`` when it has no such configuration.
-    """
-    cfg = getattr(getattr(env, "unwrapped", env), "config", None)
-    if cfg is None and callable(getattr(env, "get_attr", None)):
-        try:
-            cfg = env.get_attr("config", indices=[0])[0]
-        except AttributeError:
-            cfg = None
-    if cfg is None or not hasattr(cfg, "param_rows"):
-        raise TypeError(f"env must be a tether_gym/TetherLibration env (wrapped or vector), "
-                        f"got {type(env).__name__} without its config")
-    return cfg
 
 
 class SafetyFilter:

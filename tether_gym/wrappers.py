@@ -22,8 +22,9 @@ import gymnasium as gym
 import numpy as np
 
 from .envs.actions import require_rate_mode
+from .envs.config import env_config
 from .physics import STATE
-from .safety import FilterResult, SafetyFilter, env_config
+from .safety import FilterResult, SafetyFilter
 
 __all__ = ["SafetyFilterWrapper", "FilterInTheLoop", "INFO_KEYS", "IDLE_INFO", "state_of",
            "INFEASIBLE_WARNING"]

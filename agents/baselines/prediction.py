@@ -17,9 +17,9 @@ from typing import TypeVar
 
 import numpy as np
 
+from tether_gym.envs.config import env_config
 from tether_gym.params import Gravity
 from tether_gym.physics import PARAMS, STATE, transition
-from tether_gym.safety import env_config
 
 from ..common.obs import ObservationLayout
 

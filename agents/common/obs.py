@@ -17,9 +17,9 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from tether_gym.envs.actions import RATE, require_rate_mode
+from tether_gym.envs.config import env_config
 from tether_gym.envs.layout import OBSERVATION
 from tether_gym.physics import STATE
-from tether_gym.safety import env_config
 
 __all__ = ["ObservationLayout", "ObservedState", "ReelRatePolicy", "RATE_ENV_KWARGS",
            "require_rate_mode", "with_rate_mode", "require_predict"]

@@ -43,7 +43,8 @@ import numpy as np
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvObs, VecEnvStepReturn
 
-from tether_gym.safety import SafetyFilter, env_config
+from tether_gym.envs.config import env_config
+from tether_gym.safety import SafetyFilter
 from tether_gym.wrappers import INFO_KEYS, FilterInTheLoop
 
 from ..baselines.smc import SlidingModeController

@@ -33,8 +33,8 @@ from ..tasks.reward import RewardWeights
 from .actions import INCREMENT, RATE
 from .layout import OBSERVATION
 
-__all__ = ["EnvConfig", "Action", "Reference", "Episode", "Randomisation", "FLAT_NAMES",
-           "PAPER_INITIAL_THETA", "ACTION_MODES"]
+__all__ = ["EnvConfig", "env_config", "Action", "Reference", "Episode", "Randomisation",
+           "FLAT_NAMES", "PAPER_INITIAL_THETA", "ACTION_MODES"]
 
 PAPER_INITIAL_THETA = 0.1
 """theta_1(0) [rad] of the paper's Sec. 4.3 case (the other tethers start at 0)."""
@@ -447,3 +447,26 @@ class EnvConfig:
         limit = self.reels.accel_limit
         return self.scales.accel_bound(0.01 if limit is None else limit)
 
+
+def env_config(env: Any):
+    """The :class:`~tether_gym.envs.config.EnvConfig` of a TetherLibration env.
+
+    ``env`` is the env, wrapped or not, its vector env, a stable-baselines3 VecEnv of
+    it (its first sub-env's, by ``get_attr``), or any object whose ``config`` (or
+    ``unwrapped.config``) is an EnvConfig.
+
+    Raises
+    ------
+    TypeError
+        Naming the type of ``env`` when it has no such configuration.
+    """
+    cfg = getattr(getattr(env, "unwrapped", env), "config", None)
+    if cfg is None and callable(getattr(env, "get_attr", None)):
+        try:
+            cfg = env.get_attr("config", indices=[0])[0]
+        except AttributeError:
+            cfg = None
+    if cfg is None or not hasattr(cfg, "param_rows"):
+        raise TypeError(f"env must be a tether_gym/TetherLibration env (wrapped or vector), "
+                        f"got {type(env).__name__} without its config")
+    return cfg
