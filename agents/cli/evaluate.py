@@ -26,6 +26,7 @@ import tether_gym
 
 from ..common.env_kwargs import parse_env_kwargs
 from ..evaluation.benchmark import (
+    DEFAULT_OUT_PARENT,
     MAX_SEED,
     MAX_SEEDS,
     MAX_TORCH_THREADS,
@@ -33,6 +34,7 @@ from ..evaluation.benchmark import (
     check_int,
     check_out_dir,
     evaluate,
+    new_out_dir,
 )
 from ..evaluation.registry import BASELINES, default_policies, resolve_policy
 from ..evaluation.results import markdown_tables
@@ -79,8 +81,11 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     parser.add_argument("--seeds", type=int, default=10,
                         help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
     parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
-    parser.add_argument("--out", type=Path, default=Path("runs/eval"),
-                        help="folder for results.json and plots (default runs/eval)")
+    parser.add_argument("--out", default=None,
+                        help="folder for results.json and plots (default: a new folder "
+                             f"{DEFAULT_OUT_PARENT}/<YYYYmmdd-HHMMSS>/ per call, so that no "
+                             "evaluation overwrites another; an existing --out is written "
+                             "over)")
     parser.add_argument("--torch-threads", type=int, default=1,
                         help="torch threads for trained agents (default 1; results do not "
                              "depend on it)")
@@ -134,7 +139,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="threshold tracking RMS [rad] (default 5.5e-3)")
     curves.add_argument("--success", type=float, default=0.99,
                         help="threshold success fraction (default 0.99)")
-    curves.add_argument("--out", type=Path, required=True, help="output folder")
+    curves.add_argument("--out", required=True, help="output folder")
     return top
 
 
@@ -159,25 +164,52 @@ def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
     get_suite(args.suite)
     policies = args.policies or default_policies()
     for name in policies:
-        resolve_policy(name)
-    check_out_dir(args.out)
+        _resolved(name)
+    if args.out is None:
+        args.out = new_out_dir()
+    else:
+        check_out_dir(args.out)
+        args.out = Path(args.out)
+        if (args.out / "results.json").exists():
+            print(f"--out {args.out}: replacing the results of an earlier evaluation there")
     return env_kwargs, policies
+
+
+def _resolved(name: str):
+    """``resolve_policy(name)``, after refusing a path that is neither a file nor a folder."""
+    import os
+    import stat
+
+    path = name.removeprefix("handover:")
+    try:
+        mode = os.stat(path).st_mode if path else None
+    except (OSError, ValueError):
+        mode = None
+    if mode is not None and not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
+        raise ValueError(f"policy {name!r}: {path} is not a regular file or an agent folder "
+                         "(a FIFO, device or socket is never read)")
+    return resolve_policy(name)
 
 
 def _bench(args: argparse.Namespace, command: str) -> int:
     """Run the bench command; print the tables. Returns the exit code."""
+    made = args.out is None  # a new folder under runs/eval
     try:
         env_kwargs, policies = _checked(args)
         t0 = time.perf_counter()
         print(f"tether_gym {tether_gym.__version__}: {len(policies)} policies on suite "
               f"{args.suite!r}, {args.seeds} seeds per scenario and run, torch threads "
-              f"{args.torch_threads}" + (f", env kwargs {env_kwargs}" if env_kwargs else ""))
+              f"{args.torch_threads}" + (f", env kwargs {env_kwargs}" if env_kwargs else "")
+              + f"; results go to {args.out}")
         options = EvalOptions(out=args.out, plots=not args.no_plots,
                               torch_threads=args.torch_threads, command=command,
                               allow_pickle=args.allow_pickle)
         results = evaluate(policies, args.suite, args.seeds, args.seed, env_kwargs, options)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        if made and isinstance(args.out, Path) and args.out.is_dir() \
+                and not any(args.out.iterdir()):
+            args.out.rmdir()  # the new default folder, left empty
         return 2
     print()
     print(markdown_tables(results))
@@ -198,6 +230,11 @@ def main(argv=None) -> int:
     if args.command == "paper":
         from ..paper.cli import run as paper_run
 
+        try:
+            check_out_dir(args.out)
+        except ValueError as exc:
+            print(f"evaluate.py paper: error: {exc}", file=sys.stderr)
+            return 2
         return paper_run(args)
     if args.command == "curves":
         return _curves(args)
@@ -227,6 +264,7 @@ def _curves(args: argparse.Namespace) -> int:
             if not run.is_dir():
                 raise ValueError(f"{run} is not a folder of seed runs")
         check_out_dir(args.out)
+        args.out = Path(args.out)
         threshold = Threshold(args.rms, args.success)
         all_curves = []
         for run in args.runs:

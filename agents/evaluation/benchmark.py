@@ -46,7 +46,8 @@ from .scenarios import Scenario, get_suite
 
 __all__ = ["evaluate", "EvalOptions", "check_int", "check_out_dir", "resolve_policy",
            "make_policy", "default_policies", "PolicyKind", "PolicySpec", "BASELINES",
-           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "MAX_TORCH_THREADS", "compute_cost"]
+           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "MAX_TORCH_THREADS", "compute_cost",
+           "new_out_dir", "DEFAULT_OUT_PARENT"]
 
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
@@ -54,6 +55,8 @@ MAX_SEED = 2**31 - 1
 """Largest env seed of an episode."""
 MAX_TORCH_THREADS = 256
 """Upper bound of ``--torch-threads``."""
+DEFAULT_OUT_PARENT = Path("runs/eval")
+"""Where ``evaluate.py`` without ``--out`` makes a new results folder per call."""
 
 
 def _no_log(*args, **kwargs) -> None:
@@ -90,6 +93,7 @@ class EvalOptions:
 
     def __post_init__(self) -> None:
         if self.out is not None:
+            _check_not_empty(self.out, "out")
             object.__setattr__(self, "out", Path(self.out))
         if self.torch_threads is not None:
             check_int("torch_threads", self.torch_threads, 1, MAX_TORCH_THREADS)
@@ -111,11 +115,13 @@ def check_int(name: str, value, low: int, high: int) -> int:
     return int(value)
 
 
-def check_out_dir(out: Path, flag: str = "--out") -> None:
+def check_out_dir(out: str | Path, flag: str = "--out") -> None:
     """Create ``out`` and check that a file can be written there, before any work.
 
-    Raises ValueError when ``out`` is a file, cannot be created or is not writable.
+    Raises ValueError when ``out`` is empty (``--out ""`` would be the current folder),
+    is a file, cannot be created or is not writable.
     """
+    _check_not_empty(out, flag)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{flag} {str(out)!r} is a file; give a folder for results.json "
@@ -127,6 +133,36 @@ def check_out_dir(out: Path, flag: str = "--out") -> None:
     except OSError as exc:
         raise ValueError(f"{flag} {str(out)!r} is not a writable folder: "
                          f"{exc.strerror or exc}") from None
+
+
+def _check_not_empty(out, flag: str) -> None:
+    """Raise ValueError when the output folder ``out`` is given as an empty string."""
+    if isinstance(out, str) and not out.strip():
+        raise ValueError(f"{flag} {out!r} is empty; give a folder for the results (an empty "
+                         "path would write into the current folder)")
+
+
+def new_out_dir(parent: str | Path = DEFAULT_OUT_PARENT) -> Path:
+    """A new, empty folder ``parent/<YYYYmmdd-HHMMSS>[_K]`` for one evaluation's results.
+
+    ``evaluate.py`` without ``--out`` writes there, so that no evaluation overwrites the
+    results of an earlier one. Raises ValueError when ``parent`` cannot hold it.
+    """
+    parent = Path(parent)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        for k in range(1, 1000):
+            out = parent / (stamp if k == 1 else f"{stamp}_{k}")
+            try:
+                out.mkdir()
+                return out
+            except FileExistsError:
+                continue
+    except OSError as exc:
+        raise ValueError(f"cannot make a results folder in {str(parent)!r}: "
+                         f"{exc.strerror or exc}; give one with --out") from None
+    raise ValueError(f"{str(parent)!r} holds 999 results folders of {stamp}; give --out")
 
 
 def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, seed: int = 0,

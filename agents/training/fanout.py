@@ -69,7 +69,7 @@ from ..files.run_folder import (
 )
 from .config import ConfigError
 from .run import train
-from .settings import TrainOptions, TrainSettings, resolve_settings
+from .settings import TrainOptions, TrainSettings, check_ray_address, resolve_settings
 
 __all__ = ["RAY_PIP", "RunState", "SeedStatus", "SeedJob", "SeedResult", "run_fanout", "run_jobs",
            "init_ray", "shutdown_ray", "require_ray", "run_state", "train_seed"]
@@ -183,30 +183,80 @@ def init_ray(address: str | None = None) -> bool:
         When the cluster at ``address`` cannot be reached (within
         :data:`CONNECT_TIMEOUT_S` for a host and port nothing answers on).
     """
+    if address is None and os.environ.get("RAY_ADDRESS", "").strip():
+        address = check_ray_address(os.environ["RAY_ADDRESS"], "RAY_ADDRESS")
+    elif address is not None:
+        address = check_ray_address(address)
     ray = require_ray()
     if ray.is_initialized():
         return False
-    address = address or os.environ.get("RAY_ADDRESS") or None
-    if not address:
+    if address in (None, "local"):
         _start_local(ray)
         return True
     quiet = {"logging_level": logging.WARNING, "log_to_driver": False}
-    try:  # the workers of other nodes get the thread settings as a runtime env
-        _probe(address)
-        ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
-    except (ConnectionError, RuntimeError, OSError) as exc:
-        raise ConfigError(
-            f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
-            f"({type(exc).__name__}: {(str(exc) or 'no answer').splitlines()[0]}). Start it "
-            f"with `ray start --head` and give its address; a cluster with token "
-            f"authentication needs its token here too (RAY_AUTH_MODE=token and RAY_AUTH_TOKEN, "
-            f"as on its nodes)") from exc
-    return True
+    with _ray_stderr() as said:
+        try:  # the workers of other nodes get the thread settings as a runtime env
+            _probe(address)
+            ray.init(address=address, runtime_env={"env_vars": dict(TASK_ENV)}, **quiet)
+            failure = None
+        except (ConnectionError, RuntimeError, OSError, ValueError) as exc:
+            failure = exc
+    if failure is None:
+        sys.stderr.write(said.text)  # a connected cluster's warnings are shown
+        return True
+    last = [line for line in said.text.splitlines() if line.strip()][-1:]
+    raise ConfigError(
+        f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
+        f"({type(failure).__name__}: {(str(failure) or 'no answer').splitlines()[0]}"
+        + (f"; Ray's last line: {last[0].split('] ', 1)[-1][:200]}" if last else "")
+        + "). Start it with `ray start --head` and give its address; a cluster with token "
+        "authentication needs its token here too (RAY_AUTH_MODE=token and RAY_AUTH_TOKEN, "
+        "as on its nodes)") from failure
+
+
+class _Captured:
+    text = ""
+
+
+@contextlib.contextmanager
+def _ray_stderr():
+    """Hold what is written to file descriptor 2 (Ray's C++ log lines) while connecting.
+
+    Ray retries an address that answers but is no Ray cluster about once a second and
+    logs each try on stderr; the retries are capped at :data:`CONNECT_RETRIES` (Ray's
+    ``RAY_gcs_server_port_wait_time_s`` unless the user set it) and the lines are given
+    back in the returned object's ``text``, for the caller to show or summarise.
+    """
+    import tempfile
+
+    said = _Captured()
+    saved_env = os.environ.get("RAY_gcs_server_port_wait_time_s")
+    if saved_env is None:
+        os.environ["RAY_gcs_server_port_wait_time_s"] = str(CONNECT_RETRIES)
+    sys.stderr.flush()
+    saved_fd = os.dup(2)
+    with tempfile.TemporaryFile("w+b") as held:
+        os.dup2(held.fileno(), 2)
+        try:
+            yield said
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved_fd, 2)
+            os.close(saved_fd)
+            if saved_env is None:
+                os.environ.pop("RAY_gcs_server_port_wait_time_s", None)
+            held.seek(0)
+            said.text = held.read(1 << 16).decode("utf-8", "replace")
 
 
 CONNECT_TIMEOUT_S = 10.0
 """Seconds to wait for a cluster's host and port to accept a connection [s] (Ray itself
 retries an address nothing listens on for minutes, silently)."""
+GCS_PROBE_S = 8.0
+"""Seconds a cluster's GCS has to answer a first request [s], Python's start included."""
+CONNECT_RETRIES = 3
+"""Tries (about a second each) Ray makes to reach the cluster's GCS at an address that
+accepts connections (Ray's default: 20, each logged on stderr)."""
 
 
 def _probe(address: str) -> None:
@@ -227,6 +277,42 @@ def _probe(address: str) -> None:
         raise OSError(f"no answer within {CONNECT_TIMEOUT_S:g} s") from None
     except OSError as exc:
         raise OSError(exc.strerror or str(exc)) from None
+    if not address.startswith("ray://"):
+        _probe_gcs(address)
+
+
+#: Run in a child process: connect a GCS client to argv[1] (exit 3: this Ray has no such
+#: client, skip the check).
+_GCS_PROBE = """
+import sys
+try:
+    from ray._raylet import GcsClient
+except ImportError:
+    sys.exit(3)
+GcsClient(address=sys.argv[1], cluster_id=None)
+"""
+
+
+def _probe_gcs(address: str) -> None:
+    """Raise OSError unless a Ray cluster's GCS answers at ``HOST:PORT`` within GCS_PROBE_S.
+
+    Something that accepts connections but is no Ray cluster (a proxy, another server)
+    keeps ``ray.init`` waiting about 40 s per try, 20 tries; the check runs in a child
+    process that is killed after :data:`GCS_PROBE_S` seconds.
+    """
+    import subprocess
+
+    try:
+        done = subprocess.run([sys.executable, "-c", _GCS_PROBE, address],
+                              capture_output=True, text=True, timeout=GCS_PROBE_S,
+                              stdin=subprocess.DEVNULL, check=False)
+    except subprocess.TimeoutExpired:
+        raise OSError(f"it accepts connections, but no Ray cluster answered within "
+                      f"{GCS_PROBE_S:g} s") from None
+    if done.returncode in (0, 3):
+        return
+    lines = [line.split("] ", 1)[-1] for line in done.stderr.splitlines() if line.strip()]
+    raise OSError(f"no Ray cluster answers there ({lines[-1][:200] if lines else 'no reply'})")
 
 
 #: Environment of the processes of a local instance: the task threads, no

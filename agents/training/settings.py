@@ -41,9 +41,10 @@ from .config import (
 )
 
 __all__ = ["ALGOS", "SEED_MAX", "ConfigError", "TrainOptions", "TrainSettings",
-           "resolve_settings"]
+           "resolve_settings", "check_ray_address", "RAY_ADDRESS_FORMS"]
 
 SEED_MAX = 2**31 - 1
+RAY_ADDRESS_FORMS = "'auto', 'local', HOST:PORT or ray://HOST:PORT (PORT in 1 ... 65535)"
 _AT_LEAST_ONE = ("n_envs", "timesteps", "eval_freq", "checkpoint_freq", "eval_episodes",
                  "torch_threads", "seeds")
 _PATHS = ("config", "out", "sweep")
@@ -112,9 +113,7 @@ class TrainOptions:
                               "the same command resumes the interrupted seeds and skips "
                               "finished ones")
         if self.ray_address is not None:
-            if not str(self.ray_address).strip():
-                raise ConfigError("--ray-address must be 'auto' or HOST:PORT, got an empty "
-                                  "string")
+            check_ray_address(self.ray_address, "--ray-address")
             if not many:
                 raise ConfigError(f"--ray-address {self.ray_address} needs --seeds N or "
                                   "--sweep FILE.yml")
@@ -341,6 +340,35 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
                          env_kwargs=env_kwargs, residual=residual, features=features,
                          **counts, source=source, notes=tuple(notes),
                          command=options.argv() if command is None else tuple(command))
+
+
+def check_ray_address(address, source: str = "--ray-address") -> str:
+    """``address`` if it has the form of a Ray address, else a ConfigError naming ``source``.
+
+    The forms: ``auto`` (the cluster ``ray start`` runs on this machine), ``local`` (a new
+    local instance), ``HOST:PORT`` and ``ray://HOST:PORT`` (Ray Client), HOST a host name,
+    an IPv4 address or a bracketed IPv6 address. Nothing is contacted here.
+    """
+    import ipaddress
+    import re
+
+    text = str(address).strip()
+    if text in ("auto", "local"):
+        return text
+    host, sep, port = text.removeprefix("ray://").rpartition(":")
+    ok = bool(sep) and port.isascii() and port.isdigit() and 1 <= int(port) <= 65535
+    if ok and host.startswith("[") and host.endswith("]"):
+        try:
+            ipaddress.IPv6Address(host[1:-1])
+        except ValueError:
+            ok = False
+    elif ok:
+        ok = re.fullmatch(r"\w[\w-]{0,62}(\.\w[\w-]{0,62})*", host, re.ASCII,
+) is not None
+    if not ok:
+        raise ConfigError(f"{source} {str(address)!r} is not a Ray address; give "
+                          f"{RAY_ADDRESS_FORMS}")
+    return text
 
 
 def _read_params(options: TrainOptions, out: Path) -> tuple[dict, str]:
