@@ -6,6 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from ..common.yamlio import YamlFileError
 from .export import convert_run, export_runs
 from .folder_paths import FolderFileError
 from .safe_format import AGENT_FILE, WEIGHTS_FILE, AgentLoadError
@@ -46,7 +47,7 @@ def main(argv=None) -> int:
             print(f"exported {len(written)} run(s) to {args.dest}")
             return 0
         out = convert_run(args.run, args.out, allow_pickle=args.allow_pickle)
-    except (AgentLoadError, FolderFileError) as exc:
+    except (AgentLoadError, FolderFileError, YamlFileError) as exc:
         print(f"agent_files: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out / AGENT_FILE} and {out / WEIGHTS_FILE}")

@@ -68,6 +68,7 @@ from typing import Any
 import numpy as np
 
 from ..common.jsonio import to_jsonable
+from ..common.yamlio import MAX_YAML_BYTES, load_yaml_file
 from .folder_paths import FolderFileError, file_inside, folder_inside
 from .safe_format import AGENT_FILE
 
@@ -207,22 +208,25 @@ def write_config(run: Path, config: dict) -> None:
 def read_config(run: Path) -> dict:
     """``config.yml`` of a run as plain data (``{}`` for an empty file).
 
+    Read with :func:`~tether_gym_agents.common.yamlio.load_yaml_file` (no code run, no
+    anchors or aliases, bounded depth and size) after checking that it is a regular file
+    inside the run folder (:func:`~.folder_paths.file_inside`).
+
     Raises
     ------
     FileNotFoundError
         When the run has no ``config.yml``.
-    yaml.YAMLError
-        When it is not valid YAML.
     FolderFileError
-        When it is not a regular file inside the run folder of at most 1 MiB (a link
-        leading out, a FIFO).
+        When it is not a regular file inside the run folder (a link leading out, a
+        FIFO) or larger than :data:`~tether_gym_agents.common.yamlio.MAX_YAML_BYTES`.
+    YamlFileError
+        When it is not UTF-8 or not valid YAML (a ``ValueError`` naming it).
     """
-    import yaml
-
     path = Path(run) / CONFIG_FILE
-    if path.exists() or path.is_symlink():
-        file_inside(run, path)
-    return yaml.safe_load(path.read_text()) or {}
+    if not (path.exists() or path.is_symlink()):
+        raise FileNotFoundError(f"{path} does not exist")
+    file_inside(run, path, max_bytes=MAX_YAML_BYTES)
+    return load_yaml_file(path, what="run config") or {}
 
 
 def write_args(run: Path, args: dict) -> None:

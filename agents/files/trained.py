@@ -85,12 +85,7 @@ def hybrid_of(path) -> dict | None:
             return meta.get("hybrid") if isinstance(meta, dict) else None
         run = path if path.is_dir() else path.parent
         if (run / CONFIG_FILE).is_file():
-            import yaml
-
-            try:
-                data = read_config(run)
-            except yaml.YAMLError:
-                return None
+            data = read_config(run)  # its errors are ValueErrors: None below
             return run_hybrid(data) if isinstance(data, dict) else None
     except (OSError, UnicodeDecodeError, ValueError, AttributeError):
         return None

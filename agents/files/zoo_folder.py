@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..common.yamlio import MAX_YAML_BYTES
 from .folder_paths import FolderFileError, file_inside
 
 __all__ = ["ZOO_CONFIG_FILE", "ZOO_ARGS_FILE", "ZOO_STATS_FILE", "ZOO_BEST_MODEL_FILE",
@@ -119,13 +120,25 @@ def read_zoo_yaml(path: Path) -> dict:
     Raises
     ------
     ZooFolderError
-        If the file is not valid YAML, uses another Python tag, or is not a mapping, or
-        is not a regular file in its folder of at most 1 MiB (checked before opening).
+        If the file is not valid YAML, uses another Python tag, an anchor or alias, or
+        nests too deeply, is not a mapping, or is not a regular file in its folder of at
+        most :data:`~tether_gym_agents.common.yamlio.MAX_YAML_BYTES` (checked before it
+        is opened).
     """
     import yaml
 
     class _ZooLoader(yaml.SafeLoader):
-        pass
+        """SafeLoader with the zoo's two tags; anchors and aliases refused.
+
+        As in :mod:`tether_gym_agents.common.yamlio`: an alias bomb expands without end.
+        """
+
+        def compose_node(self, parent, index):
+            event = self.peek_event()
+            if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None):
+                raise yaml.composer.ComposerError(None, None, "YAML anchors and aliases are "
+                                                  "not accepted", event.start_mark)
+            return super().compose_node(parent, index)
 
     def ordered_dict(loader, node):
         args = loader.construct_sequence(node, deep=True)
@@ -139,14 +152,15 @@ def read_zoo_yaml(path: Path) -> dict:
     _ZooLoader.add_constructor(_TUPLE_TAG,
                                lambda loader, node: tuple(loader.construct_sequence(node)))
     try:
-        file_inside(Path(path).parent, path)
+        file_inside(Path(path).parent, path, max_bytes=MAX_YAML_BYTES)
     except FolderFileError as exc:
         raise ZooFolderError(str(exc)) from None
     try:
         data = yaml.load(path.read_text(), Loader=_ZooLoader)  # noqa: S506 - safe subclass
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
+        message = " ".join(str(exc).split())  # one line (PyYAML's marks span three)
         raise ZooFolderError(f"{path} cannot be read as rl_zoo3's YAML (plain data and "
-                             f"OrderedDict only): {exc}") from None
+                             f"OrderedDict only): {message}") from None
     if not isinstance(data, dict):
         raise ZooFolderError(f"{path} is not a mapping (got {type(data).__name__})")
     return data

@@ -101,7 +101,7 @@ def test_a_checkpoint_over_its_size_cap_is_refused_before_it_is_opened(run, caps
 
 @pytest.mark.parametrize("name", ["final_model.zip", "vecnormalize.npz",
                                   "checkpoints/model_vecnormalize_512_steps.npz",
-                                  "eval/evaluations.npz", "args.yml"])
+                                  "eval/evaluations.npz", "args.yml", "config.yml"])
 def test_resume_refuses_files_linked_out_of_the_run(run, tmp_path, capsys, name):
     target = _outside(tmp_path, name.replace("/", "_"), run / name)
     (run / name).unlink()
@@ -233,3 +233,44 @@ def test_export_of_a_clean_run_still_copies_its_files(run, tmp_path):
     assert files_main(["export", str(run), str(dest)]) == 0
     assert (dest / "agent.json").is_file() and (dest / "eval" / "evaluations.npz").is_file()
     assert (dest / "command.txt").read_text() == (run / "command.txt").read_text()
+
+
+# ---------------------------------------------------------------- YAML of run folders
+BOMB = ('a: &a ["x", "x", "x", "x", "x", "x", "x", "x", "x"]\n'
+        + "".join(f"{b}: &{b} [{', '.join(['*' + a] * 9)}]\n"
+                  for a, b in zip("abcdefgh", "bcdefghi", strict=True)))
+"""Nine levels of nine aliases: 9**9 strings from 500 bytes ("billion laughs")."""
+
+
+def test_resume_refuses_an_alias_bomb_in_config_yml(run, capsys):
+    (run / "config.yml").write_text(BOMB)
+    assert _resume(run) == 2
+    err = _err(capsys)
+    assert f"{run / 'config.yml'}" in err and "aliases" in err and "Traceback" not in err
+
+
+def test_evaluate_allow_pickle_refuses_an_alias_bomb_in_config_yml(run, tmp_path, capsys):
+    for name in ("agent.json", "policy.safetensors", "final_agent", "checkpoints"):
+        path = run / name
+        shutil.rmtree(path) if path.is_dir() else path.unlink()
+    (run / "config.yml").write_text(BOMB)
+    with _no_hang():
+        code = evaluate_main([str(run), *EVAL, "--allow-pickle", "--out", str(tmp_path / "e")])
+    assert code == 2
+    err = _err(capsys)
+    assert f"{run / 'config.yml'}" in err and "aliases" in err
+
+
+def test_convert_refuses_an_alias_bomb_in_a_zoo_config(base_run, tmp_path, capsys):
+    name = "tether_gym-TetherLibration-v1"
+    zoo = tmp_path / "logs" / "ppo" / f"{name}_1"
+    (zoo / name).mkdir(parents=True)
+    shutil.copy(base_run / "final_model.zip", zoo / f"{name}.zip")
+    (zoo / name / "config.yml").write_text(BOMB)
+    (zoo / name / "args.yml").write_text("algo: ppo\n")
+    with _no_hang():
+        code = files_main(["convert", str(zoo), "--allow-pickle", "--out", str(tmp_path / "o")])
+    assert code == 2
+    err = _err(capsys)
+    assert f"{zoo / name / 'config.yml'}" in err and "aliases" in err
+    assert len(err.strip().splitlines()) == 1
