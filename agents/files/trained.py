@@ -28,6 +28,7 @@ from .safe_format import (
     WEIGHTS_FILE,
     AgentLoadError,
     ObsNormalization,
+    checked_file,
     is_unit,
     load_agent,
     normalization_of,
@@ -50,13 +51,15 @@ def find_unit(path) -> Path | None:
     ------
     AgentLoadError
         When a run folder's ``final_agent/`` is a symlink leading outside the run folder
-        (evaluating it would evaluate another agent than the run's).
+        (evaluating it would evaluate another agent than the run's), or an
+        ``agent.json`` there is not a regular file inside its folder (a FIFO, a link out).
     """
     path = Path(path)
     if path.is_file():
         if path.name in (AGENT_FILE, WEIGHTS_FILE):
             return path.parent
         return None
+    _check_agent_file(path)
     if is_unit(path):
         return path
     for sub in RUN_AGENT_DIRS:
@@ -65,9 +68,21 @@ def find_unit(path) -> Path | None:
                 folder_inside(path, path / sub)
             except FolderFileError as exc:
                 raise AgentLoadError(str(exc)) from None
+        _check_agent_file(path / sub)
         if is_unit(path / sub):
             return path / sub
     return None
+
+
+def _check_agent_file(folder: Path) -> None:
+    """Refuse an ``agent.json`` that is there but not a regular file inside ``folder``.
+
+    (A FIFO or a link to ``/dev/zero`` named ``agent.json`` is named as such, not taken
+    for a folder without an agent.)
+    """
+    meta = folder / AGENT_FILE
+    if meta.is_symlink() or (meta.exists() and not meta.is_file()):
+        checked_file(folder, meta)
 
 
 def hybrid_of(path) -> dict | None:

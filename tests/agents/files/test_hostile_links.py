@@ -168,6 +168,19 @@ def test_evaluate_refuses_a_seed_run_linked_to_another_folder(base_run, tmp_path
     assert f"{folder / 'seed_0'} leads outside {folder} (to {base_run})" in _err(capsys)
 
 
+@pytest.mark.parametrize("hostile", ["fifo", "dev_zero"])
+def test_evaluate_names_an_agent_json_that_is_not_a_regular_file(run, tmp_path, capsys,
+                                                                 hostile):
+    meta = run / "final_agent" / "agent.json"
+    meta.unlink()
+    os.mkfifo(meta) if hostile == "fifo" else meta.symlink_to("/dev/zero")
+    with _no_hang():
+        code = evaluate_main([str(run / "final_agent"), *EVAL, "--out", str(tmp_path / "e")])
+    assert code == 2
+    err = _err(capsys)
+    assert f"{meta} is not a regular file" in err or f"{meta} leads outside" in err
+
+
 def test_evaluate_refuses_an_agent_json_over_its_cap(run, tmp_path, capsys):
     meta = run / "final_agent" / "agent.json"
     with open(meta, "r+b") as fh:
