@@ -107,15 +107,19 @@ def restamp(agent: Path) -> None:
         dump_json(agent / "agent.json", data)
 
 
-def tree_contains(root: Path, needle: str) -> list[str]:
-    """Regular files under ``root`` (not followed through links) whose bytes hold ``needle``."""
-    hits = []
+def tree_contains(root: Path, needle: str, but: Path | None = None) -> list[str]:
+    """Regular files under ``root`` (not followed through links) whose bytes hold ``needle``.
+
+    Hard links of ``but`` (the same inode) are not counted: the input put them there.
+    """
+    hits: list[str] = []
     if not root.exists():
         return hits
+    skip = os.stat(but).st_ino if but is not None and but.exists() else None
     for dirpath, _dirs, files in os.walk(root):
         for name in files:
             p = Path(dirpath) / name
-            if p.is_symlink() or not p.is_file():
+            if p.is_symlink() or not p.is_file() or os.stat(p).st_ino == skip:
                 continue
             try:
                 if needle.encode() in p.read_bytes():

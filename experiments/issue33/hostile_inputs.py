@@ -98,7 +98,7 @@ def train_cli() -> list[Input]:
         ("env_kwargs.no_eq", ["--env-kwargs", "eccentricity"]),
         ("env_kwargs.eq_only", ["--env-kwargs", "="]),
         ("env_kwargs.dup", ["--env-kwargs", "eccentricity=0.1", "eccentricity=0.2"]),
-        ("env_kwargs.big_tuple", ["--env-kwargs", "masses=(" + "1," * 200000 + ")"]),
+        ("env_kwargs.big_tuple", ["--env-kwargs", "masses=(" + "1," * 50000 + ")"]),
         ("env_kwargs.deep", ["--env-kwargs", "masses=" + "(" * 5000 + ")" * 5000]),
         ("env_kwargs.render", ["--env-kwargs", "render_mode='human'"]),
         ("out.empty", ["--out", ""]), ("out.devnull", ["--out", "/dev/null"]),
@@ -813,7 +813,7 @@ def _secret_intact(tmp, fix):
     p = tmp / "outside" / "secret.txt"
     if not p.is_file() or p.read_text() != fx.SECRET + "\n":
         return "the file outside the folder was modified"
-    hits = fx.tree_contains(tmp / "run", fx.SECRET)
+    hits = fx.tree_contains(tmp / "run", fx.SECRET, but=p)
     return f"secret written into run/{hits[0]}" if hits else None
 
 

@@ -318,10 +318,15 @@ def main(argv=None) -> int:
     lock = threading.Lock()
     args.out.parent.mkdir(parents=True, exist_ok=True)
 
+    with open(args.out, "w", newline="") as f:  # rows as they come; sorted at the end
+        csv.DictWriter(f, fieldnames=FIELDS).writeheader()
+
     def work(inp):
         row = run_one(inp, fix, args.timeout, memory, args.keep)
         with lock:
             rows.append(row)
+            with open(args.out, "a", newline="") as f:
+                csv.DictWriter(f, fieldnames=FIELDS).writerow(row)
             print(f"[{len(rows):>3}/{len(inputs)}] {row['class']:<9} {row['seconds']:>5} s "
                   f"{inp.id}: {row['message'][:100]}", flush=True)
         return row
