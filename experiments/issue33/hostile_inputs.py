@@ -156,7 +156,7 @@ def _config_input(iid, desc, expect, algo="ppo", change=None, text=None, setup_f
             setup_file(path, fix)
             return
         if text is not None:
-            fx.write(path, text)
+            fx.write(path, text() if callable(text) else text)
             return
         cfg = _base_config(algo)
         change(cfg[ENV_ID], cfg)
@@ -268,8 +268,9 @@ def train_config() -> list[Input]:
         ("alias_single", "one anchor and one alias", base + "x: &x 1\ny: *x\n"),
         ("deep_list", "50k nested [", "[" * 50000 + "]" * 50000 + "\n"),
         ("deep_map", "20k nested {a:", "{a: " * 20000 + "1" + "}" * 20000 + "\n"),
-        ("long_line", "one 20 MB line", "x: " + "a" * 20_000_000 + "\n"),
-        ("many_keys", "10 MB of keys", "".join(f"k{i}: {i}\n" for i in range(1_000_000))),
+        ("long_line", "one 20 MB line", lambda: "x: " + "a" * 20_000_000 + "\n"),
+        ("many_keys", "16 MB of keys",
+         lambda: "".join(f"k{i}: {i}\n" for i in range(1_000_000))),
         ("nul_bytes", "NUL bytes", base + "\x00\x00\x00"),
     ]
     out += [_config_input(i, d, "any" if i == "nan_key" else "invalid", text=t)
@@ -441,9 +442,10 @@ def suite_files() -> list[Input]:
             if setup_file is not None:
                 setup_file(path)
             elif text is not None:
-                fx.write(path, text)
+                fx.write(path, text() if callable(text) else text)
             else:
-                fx.write(path, yaml.safe_dump(data, sort_keys=False))
+                fx.write(path, yaml.safe_dump(data() if callable(data) else data,
+                                              sort_keys=False))
         return Input(f"suite.{iid}", "suite_yaml",
                      [*EVAL, policy, "--suite", "{tmp}/suite.yml", "--seeds", "1",
                       "--no-plots", "--out", "{tmp}/ev"], expect, desc, setup=setup,
@@ -466,7 +468,7 @@ def suite_files() -> list[Input]:
             expect="any"),
         inp("desc.list", "description: [1]", {"scenarios": [scenario(description=[1])]}),
         inp("desc.huge", "a 5 MB description",
-            {"scenarios": [scenario(description="d" * 5_000_000)]}),
+            lambda: {"scenarios": [scenario(description="d" * 5_000_000)]}),
         inp("unknown.top", "unknown top key", {**good, "bogus": 1}),
         inp("unknown.scenario", "unknown scenario key", {"scenarios": [scenario(bogus=1)]}),
         inp("env_kwargs.list", "env_kwargs: [1]", {"scenarios": [scenario(env_kwargs=[1])]}),
@@ -502,7 +504,7 @@ def suite_files() -> list[Input]:
             "scenarios:\n  - name: s1\n    description: x\n    env_kwargs:\n"
             + textwrap.indent(_alias_bomb("obs_bias"), "      "))),
         inp("deep", "50k nested [", text="[" * 50000 + "]" * 50000),
-        inp("huge", "a 9.5 MB suite", text="scenarios:\n" + "".join(
+        inp("huge", "an 11 MB suite (220k scenarios)", text=lambda: "scenarios:\n" + "".join(
             f"  - {{name: s{i}, description: x, env_kwargs: {{}}}}\n" for i in range(220000))),
         inp("yaml_error", "unbalanced bracket", text="scenarios: [\n"),
         inp("empty", "empty file", text=""),
