@@ -75,6 +75,18 @@ def secret(tmp: Path) -> Path:
     return write(tmp / "outside" / "secret.txt", SECRET + "\n")
 
 
+def snapshot(root: Path) -> dict:
+    """{relative path: (size, mtime_ns)} of everything under ``root`` (links not followed)."""
+    out = {}
+    if root.exists():
+        for dirpath, dirs, files in os.walk(root):
+            for name in dirs + files:
+                p = Path(dirpath) / name
+                st = p.lstat()
+                out[str(p.relative_to(root))] = [st.st_size, st.st_mtime_ns]
+    return out
+
+
 def load_json(path: Path):
     return json.loads(path.read_text())
 

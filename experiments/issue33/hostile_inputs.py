@@ -798,7 +798,17 @@ def _run_input(iid, surface, argv, desc, mutate=None, expect="invalid", check=No
         run = fx.copy_tree(fix / src, tmp / "run")
         if mutate is not None:
             mutate(run, tmp, fix)
-    return Input(iid, surface, argv, expect, desc, setup=setup, check=check, names=names)
+        fx.dump_json(tmp / "outside.json", fx.snapshot(tmp / "outside"))
+
+    def checks(tmp, fix):
+        before = fx.load_json(tmp / "outside.json")
+        after = fx.snapshot(tmp / "outside")
+        changed = sorted(k for k in set(before) | set(after) if before.get(k) != after.get(k))
+        if changed:
+            return f"changed outside the folders given: outside/{changed[0]}"
+        return check(tmp, fix) if check is not None else None
+
+    return Input(iid, surface, argv, expect, desc, setup=setup, check=checks, names=names)
 
 
 RESUME = [*TRAIN, "--algo", "ppo", "--resume", *TINY]
