@@ -22,11 +22,12 @@ over the scenarios).
 is read instead of evaluated (:func:`load_curves`), so curves evaluated separately, for
 example one policy per core, are put side by side without evaluating them again.
 
-**Files read.** Each checkpoint agent folder is copied for the evaluation only from its
-regular files (:func:`~tether_gym_agents.files.folder_paths.copy_tree_checked`): a
-symlink leading out of it (to ``/dev/zero``, to another agent), a FIFO or a file over
-its size cap is a ``ValueError`` naming it, before anything is evaluated; a checkpoint
-folder, ``checkpoints/`` or ``seed_K`` symlinked outside its run folder too.
+**Files read.** Of each checkpoint agent folder, only ``agent.json`` and
+``policy.safetensors`` are copied for the evaluation, each checked to be a regular file
+inside it (:func:`~tether_gym_agents.files.folder_paths.copy_files_checked`): a symlink
+leading out of it (to ``/dev/zero``, to another agent), a FIFO or a file over its size
+cap is a ``ValueError`` naming it, before anything is evaluated; a checkpoint folder,
+``checkpoints/`` or ``seed_K`` symlinked outside its run folder too.
 """
 
 from __future__ import annotations
@@ -40,9 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files.folder_paths import copy_tree_checked, file_inside
+from ..files.folder_paths import copy_files_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
-from ..files.safe_format import AGENT_FILE
+from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
 from .benchmark import EvalOptions, evaluate
 from .stats import iqm, run_scores, success_counts
 
@@ -106,7 +107,8 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
     try:
         for k, (steps, agents) in enumerate(points, 1):
             for i, (agent, _) in enumerate(agents):  # one policy, one run per seed
-                copy_tree_checked(agent, tmp / f"step_{steps}" / f"seed_{i}")
+                copy_files_checked(agent, tmp / f"step_{steps}" / f"seed_{i}",
+                                   (AGENT_FILE, WEIGHTS_FILE))
             res = evaluate([str(tmp / f"step_{steps}")], suite, n_seeds, 0,
                            options=EvalOptions(out=None, plots=False, log=None))
             out.append(_point(res, steps, [w for _, w in agents]))

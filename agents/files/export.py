@@ -76,6 +76,9 @@ def export_runs(src, dest) -> list[Path]:
     runs = seed_runs(src)
     pairs = [(run, dest / run.name) for run in runs] if runs else [(src, dest)]
     for run, _ in pairs:
+        for name in (AGENT_FILE, WEIGHTS_FILE):  # a FIFO there: named, not "no agent"
+            if (run / name).exists() or (run / name).is_symlink():
+                checked_file(src, run / name)
         if not is_unit(run):
             raise AgentLoadError(f"{run} holds no safe agent ({AGENT_FILE} + {WEIGHTS_FILE}); "
                                  "convert it first")

@@ -14,10 +14,10 @@ silently.
 
 Folders inside such a folder (``final_agent/``, ``seed_K/``, ``checkpoints/agent_N_steps/``)
 go through :func:`folder_inside`: a symlinked one must lead to a folder inside the
-folder too. :func:`copy_tree_checked` copies a folder only from checked regular files
-(no link, device or FIFO is followed or copied), and :func:`real_folder` makes the
-folders a command writes into, refusing an existing symlink among them (nothing is
-written through a link).
+folder too. :func:`copy_files_checked` copies named files of an agent folder only when
+they are checked regular files (no link out, device or FIFO is followed or copied), and
+:func:`real_folder` makes the folders a command writes into, refusing an existing
+symlink among them (nothing is written through a link).
 
 Size caps [bytes] (the largest file shipped in ``agents/pretrained`` is a 139 kB plot,
 its largest weights 48 kB):
@@ -31,6 +31,10 @@ everything else (weights, model zips, statistics,      :data:`DATA_FILE_CAP`, 51
 evaluations, TensorBoard events, plots)
 =====================================================  ==========================
 
+A hard link (a regular file with more than one name) is read like any regular file: its
+contents are interpreted, never copied elsewhere, except by an export, which refuses it
+(:mod:`.export`).
+
 The replay buffer's cap is large because SAC with ``buffer_size`` 1M and 16 envs saves
 about 180 MB per copy; the others are thousands of times what this project writes.
 """
@@ -42,7 +46,7 @@ import shutil
 import stat
 from pathlib import Path
 
-__all__ = ["FolderFileError", "file_inside", "folder_inside", "copy_tree_checked",
+__all__ = ["FolderFileError", "file_inside", "folder_inside", "copy_files_checked",
            "real_folder", "size_cap", "TEXT_FILE_CAP", "DOC_FILE_CAP", "DATA_FILE_CAP",
            "BUFFER_FILE_CAP"]
 
@@ -146,42 +150,25 @@ def folder_inside(root, path) -> Path:
     return path
 
 
-def copy_tree_checked(src, dst, root=None) -> None:
-    """Copy the folder ``src`` to the new folder ``dst`` from checked regular files only.
+def copy_files_checked(src, dst, names) -> None:
+    """Copy the files ``names`` of the folder ``src`` into the new folder ``dst``, checked.
 
-    Every entry must be a regular file (:func:`file_inside` ``root``, default ``src``)
-    or a folder (:func:`folder_inside`); its content is copied (a symlink inside the
-    folder is copied as the file it points to). Every entry is checked before anything
-    is written.
+    Each one must be a regular file inside ``src`` under its cap (:func:`file_inside`; a
+    symlink whose target stays inside is copied as that file); all are checked before
+    anything is written, and only their contents are copied. Nothing else of ``src`` is
+    read (a temporary file or folder a killed save left stays behind).
 
     Raises
     ------
     FolderFileError
-        Naming the first entry that leads outside ``root`` or is not a regular file or
-        folder (a FIFO, a device, a link to ``/dev/zero``).
+        Naming the first file that is missing, leads outside ``src``, is not a regular
+        file (a FIFO, a device, a link to ``/dev/zero``, a folder) or is over its cap.
     """
     src, dst = Path(src), Path(dst)
-    root = src if root is None else Path(root)
-    folder_inside(root, src)
-    files, folders = [], []
-    pending = [src]
-    while pending:
-        folder = pending.pop()
-        for entry in sorted(folder.iterdir()):
-            resolved = entry.resolve()
-            if resolved.is_dir() and not stat.S_ISLNK(entry.lstat().st_mode):
-                pending.append(entry)
-                folders.append(entry)
-            elif resolved.is_dir():
-                raise FolderFileError(f"{entry} is a symlink to a folder; agent folders are "
-                                      "copied only from regular files inside them")
-            else:
-                files.append(file_inside(root, entry))
+    files = [file_inside(src, src / name) for name in names]
     dst.mkdir(parents=True)
-    for folder in folders:
-        (dst / folder.relative_to(src)).mkdir(parents=True, exist_ok=True)
     for path in files:
-        shutil.copyfile(path, dst / path.relative_to(src))
+        shutil.copyfile(path, dst / path.name)
 
 
 def real_folder(dest, relative=".") -> Path:

@@ -189,7 +189,7 @@ def test_evaluate_refuses_an_agent_json_over_its_cap(run, tmp_path, capsys):
     assert f"{meta} is {TEXT_FILE_CAP + 1} bytes" in _err(capsys)
 
 
-@pytest.mark.parametrize("hostile", ["dev_zero", "outside", "fifo"])
+@pytest.mark.parametrize("hostile", ["dev_zero", "outside", "fifo", "folder"])
 def test_curves_copy_only_regular_files_inside_the_agent_folder(run, tmp_path, capsys,
                                                                 hostile):
     agent = run / "checkpoints" / "agent_256_steps"
@@ -198,6 +198,8 @@ def test_curves_copy_only_regular_files_inside_the_agent_folder(run, tmp_path, c
     weights.unlink()
     if hostile == "fifo":
         os.mkfifo(weights)
+    elif hostile == "folder":
+        weights.mkdir()
     else:
         weights.symlink_to("/dev/zero" if hostile == "dev_zero" else target)
     with _no_hang():
@@ -239,6 +241,16 @@ def test_export_refuses_a_hard_link(run, tmp_path, capsys):
     assert files_main(["export", str(run), str(dest)]) == 2
     assert f"{run / 'command.txt'} is a hard link" in _err(capsys)
     assert not dest.exists() or not any(dest.rglob("*"))
+
+
+@pytest.mark.parametrize("name", ["agent.json", "policy.safetensors"])
+def test_export_names_an_agent_file_that_is_a_fifo(run, tmp_path, capsys, name):
+    (run / name).unlink()
+    os.mkfifo(run / name)
+    with _no_hang():
+        assert files_main(["export", str(run), str(tmp_path / "dest")]) == 2
+    assert f"{run / name} is not a regular file" in _err(capsys)
+    assert not (tmp_path / "dest").exists()
 
 
 def test_export_of_a_clean_run_still_copies_its_files(run, tmp_path):
