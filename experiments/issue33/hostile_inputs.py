@@ -1188,10 +1188,40 @@ def mpc() -> list[Input]:
     return out
 
 
+# --------------------------------------------------------------------------- #
+# an install without an optional dependency (the module shadowed by one that fails)
+def missing_dependency() -> list[Input]:
+    def shadow(*names):
+        def setup(tmp, fix):
+            for name in names:
+                fx.write(tmp / "shadow" / name / "__init__.py",
+                         f"raise ModuleNotFoundError(\"No module named '{name}'\", "
+                         f"name={name!r})\n")
+        return setup
+
+    env = ["env", "PYTHONPATH={tmp}/shadow"]
+    cases = [
+        ("train.torch", ("torch",), [*TRAIN, *TINY], "invalid"),
+        ("train.yaml", ("yaml",), [*TRAIN, *TINY], "invalid"),
+        ("train.tqc", ("sb3_contrib",), [*TRAIN, "--algo", "tqc", *TINY], "invalid"),
+        ("train.ray", ("ray",), [*TRAIN, *TINY, "--seeds", "2"], "invalid"),
+        ("eval.default.torch", ("torch",), [*EVAL, *ETINY], "invalid"),
+        ("eval.agent.torch", ("torch",), [*EVAL, "{fix}/run_ppo", *ETINY], "invalid"),
+        ("eval.mpc.casadi", ("casadi",), [*EVAL, "mpc", *ETINY], "invalid"),
+        ("eval.smc.torch", ("torch", "stable_baselines3"), [*EVAL, "smc", *ETINY], "any"),
+        ("files.export.torch", ("torch",), [*FILES, "export", "{fix}/run_ppo", "{tmp}/d"],
+         "any"),
+    ]
+    return [Input(f"nodep.{i}", "missing_dep", [*env, *argv], e,
+                  f"{' '.join(mods)} not installed: {' '.join(argv[1:3])}".replace(
+                      "{repo}/", ""), setup=shadow(*mods), names="pip install")
+            for i, mods, argv, e in cases]
+
+
 SURFACES = {"train_cli": train_cli, "train_config": train_config, "train_sweep": sweep_files,
             "evaluate_cli": evaluate_cli, "suite_yaml": suite_files,
             "agent_folder": agent_folders, "run_folder": run_folders, "gym_make": gym_make,
-            "mpc": mpc}
+            "mpc": mpc, "missing_dep": missing_dependency}
 
 
 def all_inputs() -> list[Input]:
