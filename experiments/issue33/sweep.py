@@ -53,16 +53,16 @@ BAD = ("traceback", "accepted", "hang")
 """The classes issue 33 requires to be zero."""
 MAX_MESSAGE_LINES = 3
 _WARNING_LINE = re.compile(r"^\S.*:\d+: \w*Warning: ")
-_LOG_NOISE = re.compile(r"^(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d,\d+\s+(INFO|WARNING|DEBUG)|"
-                        r"\[\d{4}-\d\d-\d\d )")
+_GYM_WARN = re.compile(r"^(\x1b\[\d+m)?WARN: ")
 
 
 def message_lines(stderr: str) -> list[str]:
     """The lines of an error message: stderr's nonblank lines, less Python warnings.
 
-    A warning (``file:line: XWarning: text``) and the source line printed under it (indented)
-    are left out, as are blank lines and argparse's usage block before its
-    ``prog: error: ...`` line (:func:`argparse_usage` counts those); everything else counts.
+    A warning (``file:line: XWarning: text``) and the source line printed under it
+    (indented) and gymnasium's ``WARN:`` lines are left out, as are blank lines and
+    argparse's usage block before its ``prog: error: ...`` line (:func:`argparse_usage`
+    counts those); everything else counts (Ray's log lines too).
     """
     lines = stderr.splitlines()
     out: list[str] = []
@@ -79,6 +79,8 @@ def message_lines(stderr: str) -> list[str]:
             in_usage = False
         if _WARNING_LINE.match(line):
             skip_indented = True
+            continue
+        if _GYM_WARN.match(line):  # gymnasium's logger.warn
             continue
         if skip_indented and line.startswith((" ", "\t")):
             continue
