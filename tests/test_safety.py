@@ -4,6 +4,7 @@ leaves safe commands alone (checked against a brute-force grid over the command 
 from __future__ import annotations
 
 import math
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -217,3 +218,36 @@ def test_bad_project_values_name_the_argument(filt, cases, name):
     kwargs = dict(nu=nu[0], state=y[:1], command=desired[:1]) | {name: "abc"}
     with pytest.raises(TypeError, match=rf"^{name}='abc' must"):
         filt.project(**kwargs)
+
+
+# --------------------------------------------------------------------------- #
+# the warning of an infeasible command (FilterInTheLoop, tether_gym.wrappers)
+def test_an_infeasible_command_is_warned_of_once_per_process_with_the_filter(env, monkeypatch):
+    """Two loops of the same filter settings, a library's catch_warnings between them (it
+    resets Python's once-per-location registry, as in the main job): one warning, naming
+    the filter and what it did."""
+    from tether_gym import wrappers
+
+    monkeypatch.setattr(wrappers, "_WARNED", set())
+    # theta = 1.4 rad, theta' = -1: T^ < 0 for every command (tests/test_wrappers.py)
+    y = np.array([[1.4, 1.4, -1.0, -1.0, 0.5, 0.5, 0.0, 0.0]])
+    nu, desired = np.zeros(1), np.zeros((1, N))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("default")
+        first = wrappers.FilterInTheLoop(SafetyFilter.for_env(env), N)
+        first((nu, y), desired)
+        with warnings.catch_warnings():
+            pass
+        second = wrappers.FilterInTheLoop(SafetyFilter.for_env(env), N)
+        second((nu, y), desired)
+    assert (first.infeasible, second.infeasible) == (1, 1)  # both counted
+    assert len(caught) == 1, [str(w.message) for w in caught]
+    (warning,) = caught
+    assert issubclass(warning.category, wrappers.InfeasibleCommandWarning)
+    assert issubclass(warning.category, UserWarning)
+    text = str(warning.message)
+    assert text.startswith(f"tether_gym safety filter {first.safety_filter!r}: 1 of the 1 ")
+    assert wrappers.INFEASIBLE_WARNING in text and "filter_feasible" in text
+    # other settings are news: warned of again
+    with pytest.warns(wrappers.InfeasibleCommandWarning, match="margin=0.7"):
+        wrappers.FilterInTheLoop(SafetyFilter.for_env(env, margin=0.7), N)((nu, y), desired)

@@ -27,7 +27,7 @@ from .physics import STATE
 from .safety import FilterResult, SafetyFilter
 
 __all__ = ["SafetyFilterWrapper", "FilterInTheLoop", "INFO_KEYS", "IDLE_INFO", "state_of",
-           "INFEASIBLE_WARNING"]
+           "INFEASIBLE_WARNING", "InfeasibleCommandWarning"]
 
 IDLE_INFO = MappingProxyType({"filter_active": False, "filter_correction": 0.0,
                               "filter_feasible": True})
@@ -39,11 +39,27 @@ the command was changed), ``filter_correction`` (float, |u_filtered - u| [-]) an
 ``filter_feasible`` (bool, the command sent meets every predicted constraint)."""
 
 INFEASIBLE_WARNING = (
-    "safety filter: no reel command meets every predicted constraint (tension >= margin, "
-    "braking-stop length inside the bounds) at some step; it sent the command of largest "
-    "predicted tension margin inside the length box. Such steps have "
-    "info['filter_feasible'] False and are counted by FilterInTheLoop.infeasible")
-"""Text of the warning of the first infeasible command of a :class:`FilterInTheLoop`."""
+    "no reel command met every predicted constraint (tension >= margin, braking-stop "
+    "length inside the bounds), so the filter sent the command of largest predicted "
+    "tension margin inside the length box, which may still let a tether go slack. Said "
+    "once per process for these filter settings (warnings.filterwarnings('ignore', "
+    "category=tether_gym.wrappers.InfeasibleCommandWarning) silences it); every such step "
+    "has info['filter_feasible'] False and is counted by FilterInTheLoop.infeasible")
+"""What the warning of an infeasible command means (its message's fixed part)."""
+
+
+class InfeasibleCommandWarning(UserWarning):
+    """A safety filter found no command meeting every predicted constraint.
+
+    Raised by :class:`FilterInTheLoop` once per process and filter settings (the
+    filter's ``repr``), whichever policy or env the filter serves: Python's own
+    once-per-location registry is reset whenever any library enters
+    ``warnings.catch_warnings``, which showed the same warning again and again.
+    """
+
+
+_WARNED: set[str] = set()
+"""The filter settings (``repr``) whose infeasible command was warned of in this process."""
 
 State = tuple[float | np.ndarray, np.ndarray]
 """(nu [rad], scalar or (B,); state rows (B, 4n) in the STATE layout)."""
@@ -83,9 +99,10 @@ class FilterInTheLoop:
     ``infeasible`` (the ones with no command meeting every constraint); ``last_result``
     and ``last_active`` ((B,) bool) describe the last call (None without a filter).
 
-    The first infeasible command also raises :data:`INFEASIBLE_WARNING` as a
-    ``UserWarning`` (Python shows it once per process by default): the command sent
-    then is the one of largest predicted tension, which may still go slack.
+    The first infeasible command of a filter's settings in the process also raises an
+    :class:`InfeasibleCommandWarning` naming the filter, the step and the rows, then
+    :data:`INFEASIBLE_WARNING`: the command sent then is the one of largest predicted
+    tension, which may still go slack.
     """
 
     def __init__(self, safety_filter: SafetyFilter | None, n_tethers: int):
@@ -129,10 +146,20 @@ class FilterInTheLoop:
         self.steps += int(res.active.shape[0])
         self.interventions += int(res.active.sum())
         infeasible = int((~res.feasible).sum())
-        if infeasible and not self.infeasible:
-            warnings.warn(INFEASIBLE_WARNING, UserWarning, stacklevel=2)
+        if infeasible:
+            self._warn_infeasible(infeasible, int(res.active.shape[0]))
         self.infeasible += infeasible
         return res.command
+
+    def _warn_infeasible(self, rows: int, batch: int) -> None:
+        settings = repr(self.safety_filter)
+        if settings in _WARNED:
+            return
+        _WARNED.add(settings)
+        warnings.warn(f"tether_gym safety filter {settings}: {rows} of the {batch} "
+                      f"command(s) of one call infeasible ({self.steps} commands filtered "
+                      f"since its counters were reset): {INFEASIBLE_WARNING}",
+                      InfeasibleCommandWarning, stacklevel=3)
 
     def info(self, row: int = 0) -> dict[str, Any]:
         """Row ``row``'s :data:`INFO_KEYS` entries of the last call (idle without one)."""
