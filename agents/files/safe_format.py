@@ -61,7 +61,7 @@ from ..common.algorithms import ALGORITHMS, ALGOS, Algorithm, algorithm
 from ..common.features import FeatureSpec
 from ..common.jsonio import sha256_file, to_jsonable
 from ..hybrids.residual_spec import ResidualSpec
-from .agent_values import ValueProblem, check_values
+from .agent_values import ValueProblem, check_values, check_weights
 from .folder_paths import FolderFileError, file_inside
 from .policy_json import (
     PolicyJsonError,
@@ -324,6 +324,10 @@ def load_agent(path):
         state = _safetensors().load_file(str(weights), device="cpu")
     except Exception as exc:  # noqa: BLE001 - SafetensorError, OSError, ...
         raise AgentLoadError(f"cannot read weights {weights}: {exc}") from None
+    try:
+        check_weights(state, weights)
+    except ValueProblem as exc:
+        raise AgentLoadError(str(exc)) from None
     target = policy if row.weights == "policy" else getattr(policy, row.weights)
     try:
         target.load_state_dict(state, strict=True)
@@ -376,9 +380,13 @@ def _read_meta(path: Path) -> dict:
 def _checked_weights(path: Path, meta: dict) -> Path:
     """The weights file that ``meta`` records, present and matching its SHA-256."""
     meta_path, algo = path / AGENT_FILE, meta["algo"]
-    info = meta["weights"]
-    if not isinstance(info, dict) or set(info) < {"file", "module", "sha256"}:
-        raise AgentLoadError(f"{meta_path}: 'weights' must give file, module and sha256")
+    info, keys = meta["weights"], ("file", "module", "sha256")
+    if not isinstance(info, dict) or set(info) != set(keys):
+        got = sorted(info) if isinstance(info, dict) else info
+        raise AgentLoadError(f"{meta_path}: weights={got!r}; allowed: a mapping of exactly "
+                             f"{list(keys)}" + (f" (unknown: {sorted(set(info) - set(keys))}"
+                                               f", missing: {sorted(set(keys) - set(info))})"
+                                               if isinstance(info, dict) else ""))
     if info["module"] != ALGORITHMS[algo].weights:
         raise AgentLoadError(f"{meta_path}: weights module {info['module']!r} does not "
                              f"fit {algo.upper()} (expected {ALGORITHMS[algo].weights!r})")

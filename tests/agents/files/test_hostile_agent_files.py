@@ -229,13 +229,21 @@ def test_values_in_bounds_load_and_act(unit, tmp_path):
 
 
 def test_tqc_critics_are_counted_with_their_quantiles():
-    """A TQC critic has n_quantiles outputs: [1024, 1024] critics of 4096 quantiles build
-    2 nets x (critic + target) x 5.3M weights, over the bound; SAC's of one output do not."""
+    """A TQC critic has n_quantiles outputs: 8 [1024, 1024] critics of 256 quantiles build
+    8 nets x (critic + target) x 1.3M weights, over the bound; SAC's of one output do not.
+    The counts lie in the algorithm's bounds (common.algorithms)."""
     from tether_gym_agents.files.agent_values import ValueProblem, check_net_arch
 
-    check_net_arch("sac", {"net_arch": [1024, 1024]}, 12, 2)
+    check_net_arch("sac", {"net_arch": [1024, 1024], "n_critics": 8}, 12, 2)
     check_net_arch("tqc", {"net_arch": [1024, 1024]}, 12, 2)  # 25 quantiles by default
     with pytest.raises(ValueProblem, match=r"builds about 2[0-9],\d{3},\d{3} parameters"):
-        check_net_arch("tqc", {"net_arch": [1024, 1024], "n_quantiles": 4096}, 12, 2)
+        check_net_arch("tqc", {"net_arch": [1024, 1024], "n_quantiles": 256, "n_critics": 8},
+                       12, 2)
+    with pytest.raises(ValueProblem, match=r"policy_kwargs.n_quantiles=4096; allowed: a "
+                                           r"whole number in \[1, 256\]"):
+        check_net_arch("tqc", {"net_arch": [64], "n_quantiles": 4096}, 12, 2)
     with pytest.raises(ValueProblem, match=r"policy_kwargs.n_critics='two'"):
         check_net_arch("tqc", {"net_arch": [64], "n_critics": "two"}, 12, 2)
+    with pytest.raises(ValueProblem, match=r"policy_kwargs.n_critics=1000000; allowed: a "
+                                           r"whole number in \[1, 16\]"):
+        check_net_arch("td3", {"net_arch": [64], "n_critics": 1000000}, 12, 2)
