@@ -350,8 +350,9 @@ def _start_local(ray) -> None:
     # A local instance's workers inherit the environment of the processes ray.init
     # starts: the thread settings without a runtime env, whose set-up was measured to
     # add about 4 s to the first tasks on a busy 2-core machine.
-    saved = {k: os.environ.get(k) for k in LOCAL_ENV}
-    os.environ.update(LOCAL_ENV)
+    local_env = {**LOCAL_ENV, **ray_reaper.fate_env(folder, os.getpid())}
+    saved = {k: os.environ.get(k) for k in local_env}
+    os.environ.update(local_env)
     try:
         # "local": a new instance even when a `ray start` cluster runs on this machine
         ray.init(address="local", num_cpus=os.cpu_count(), include_dashboard=False,

@@ -10,6 +10,14 @@ RECORD``, in its own session) that SIGKILLs the recorded processes still alive o
 driver is gone. If the watcher is killed too, the next local start reaps what the
 record files of dead drivers name (:func:`reap_stale`).
 
+The agents notice the raylet's death, but then wait without end for the dead GCS to take
+their last report; so, third, every Python process of a local instance follows the driver
+by itself: :func:`fate_env` puts a ``sitecustomize`` module (:data:`FOLLOW_DRIVER`, the
+standard library only) first on the ``PYTHONPATH`` the instance's processes inherit, whose
+daemon thread ends its process (``os._exit``) within :data:`POLL_S` once the driver named
+in ``TETHER_GYM_RAY_DRIVER`` is gone; it then imports any other ``sitecustomize`` as
+before. (Ray's C++ processes, GCS and raylet, end with the driver by themselves.)
+
 Processes are named by (pid, start time) as Linux's ``/proc`` gives them: a pid reused
 by another process is never signalled (where there is no ``/proc`` nothing is
 recorded). Only the standard library is imported: the watcher starts in a moment.
@@ -24,7 +32,8 @@ import sys
 import time
 from pathlib import Path
 
-__all__ = ["record", "reap", "reap_stale", "watch", "POLL_S"]
+__all__ = ["record", "reap", "reap_stale", "watch", "fate_env", "POLL_S", "FOLLOW_DRIVER",
+           "DRIVER_VARIABLE"]
 
 POLL_S = 0.5
 """Seconds between the watcher's checks of the driver [s]."""
@@ -109,6 +118,73 @@ def reap_stale(folder: Path) -> int:
         if not _alive(driver):
             killed += reap(path)
     return killed
+
+
+DRIVER_VARIABLE = "TETHER_GYM_RAY_DRIVER"
+"""Environment variable naming the driver a local instance's processes follow
+(``PID:START``, START its start time as /proc gives it)."""
+
+FOLLOW_DRIVER = f"""# written by tether_gym_agents.training.ray_reaper: the processes of a local Ray
+# instance end when the driver that started it is gone (kill -9 included)
+import os, sys, threading, time
+
+
+def _start_time(pid):
+    try:
+        with open(f"/proc/{{pid}}/stat") as fh:
+            text = fh.read()
+    except OSError:
+        return None
+    fields = text[text.rindex(")") + 2:].split()
+    return None if fields[0] == "Z" else fields[19]
+
+
+def _follow(pid, started):
+    while _start_time(pid) == started:
+        time.sleep({POLL_S!r})
+    os._exit(0)
+
+
+def _main():
+    pid, _, started = os.environ.get({DRIVER_VARIABLE!r}, "").partition(":")
+    if pid.isdigit() and started and _start_time(int(pid)) is not None:
+        threading.Thread(target=_follow, args=(int(pid), started), daemon=True,
+                         name="follow-driver").start()
+
+
+_main()
+# then any other sitecustomize, as if this one were not here
+_here = os.path.dirname(os.path.abspath(__file__))
+sys.path[:] = [p for p in sys.path if os.path.abspath(p or ".") != _here]
+del sys.modules["sitecustomize"]
+try:
+    import sitecustomize  # noqa: F401
+except ImportError:
+    pass
+"""
+"""Source of the ``sitecustomize`` module of a local instance's processes."""
+
+
+def fate_env(folder: Path, driver: int) -> dict[str, str]:
+    """Environment that makes the Python processes a local instance starts follow ``driver``.
+
+    Writes :data:`FOLLOW_DRIVER` as ``folder/site/sitecustomize.py``; returns
+    ``PYTHONPATH`` (that folder first) and :data:`DRIVER_VARIABLE`. Empty where there is
+    no /proc (nothing to follow with).
+    """
+    started = _start_time(driver)
+    if started is None:
+        return {}
+    site = Path(folder) / "site"
+    site.mkdir(parents=True, exist_ok=True)
+    target = site / "sitecustomize.py"
+    if not target.is_file() or target.read_text() != FOLLOW_DRIVER:
+        tmp = site / f".sitecustomize.{os.getpid()}.tmp"
+        tmp.write_text(FOLLOW_DRIVER)
+        os.replace(tmp, target)
+    path = os.environ.get("PYTHONPATH")
+    return {"PYTHONPATH": str(site) + (os.pathsep + path if path else ""),
+            DRIVER_VARIABLE: f"{driver}:{started}"}
 
 
 def watch(driver: int, path: Path) -> None:
