@@ -171,6 +171,12 @@ def test_the_cheap_readme_commands_run_as_printed(tmp_path, monkeypatch):
     # the README's evaluate line for runs/n4 is the one train.py printed for it
     n4 = next(out for cmd, out in printed.items() if "--out runs/n4" in cmd)
     assert re.findall(r"`(python evaluate\.py [^`]*)`", n4) == ["python evaluate.py smc runs/n4"]
+    # and the README's comment on the runs/ppo evaluation quotes what train.py printed
+    ppo = printed["python train.py --algo ppo --timesteps 20000 --out runs/ppo"]
+    (suggested,) = re.findall(r"`(python evaluate\.py [^`]*)`", ppo)
+    line = next(x for x in README.read_text().splitlines()
+                if x.startswith("python evaluate.py smc runs/ppo --suite paper"))
+    assert f"train.py's last line suggests `{suggested}`" in line
 
 
 @pytest.mark.parametrize("text", ["```bash\npython evaluate.py smc runs/x   # note\n```\n",
@@ -188,3 +194,14 @@ def test_the_safety_filter_wrapper_example_runs(capsys):
     active, correction, feasible = capsys.readouterr().out.split()
     assert active in ("True", "False") and float(correction) >= 0.0
     assert feasible in ("True", "False")
+
+
+def test_the_trained_agent_example_runs_an_episode():
+    readme = README.read_text()
+    section = readme[readme.index("**Use a trained agent in your own code.**"):]
+    code = re.search(r"```python\n(.*?)```", section, re.S).group(1)
+    assert "from tether_gym_agents.files.trained import PRETRAINED_DIR, TrainedAgent" in code
+    scope: dict = {"__name__": "readme_example"}
+    exec(compile(code, "README.md", "exec"), scope)
+    assert scope["done"] and scope["agent"].algo == "ppo"
+    assert scope["env"].observation_space.contains(scope["obs"])

@@ -1,0 +1,62 @@
+"""``python evaluate.py`` (the main job) reproduces the shipped ``docs/eval/results.json``.
+
+The README says what equals what: every episode's success and failure flags exactly,
+every other per-episode metric to a relative :data:`RTOL`. This test re-runs two
+baselines that need neither torch nor a trained agent (``smc``, and ``predictive``,
+the one whose figures moved in the trailing digits on another machine) on three of the
+default suite's scenarios, through the library call ``evaluate.py`` makes, and compares
+each episode with its shipped record. ``ms/step`` is a wall time and is not compared.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from tether_gym_agents import evaluate
+from tether_gym_agents.evaluation.scenarios import get_suite
+
+SHIPPED = Path(__file__).resolve().parents[1] / "docs" / "eval" / "results.json"
+POLICIES = ("smc", "predictive")
+SCENARIOS = ("paper", "ecc_0.3", "mismatch")
+EXACT = ("success", "slack", "tumble", "length")
+RTOL = 1e-6
+"""Relative tolerance of the real-valued metrics (the README quotes it)."""
+
+
+def _suite_file(folder: Path) -> Path:
+    chosen = [s for s in get_suite("default") if s.name in SCENARIOS]
+    suite = {"scenarios": [{"name": s.name, "description": s.description,
+                            "env_kwargs": s.env_kwargs,
+                            **({"nominal": s.nominal} if s.nominal else {})} for s in chosen]}
+    path = folder / "suite.yml"
+    path.write_text(json.dumps(suite))  # JSON is YAML
+    return path
+
+
+def test_shipped_episodes_of_the_main_job_reproduce(tmp_path):
+    shipped = json.loads(SHIPPED.read_text())
+    assert shipped["meta"]["command"] == "evaluate.py --out docs/eval"
+    got = evaluate(list(POLICIES), suite=str(_suite_file(tmp_path)), n_seeds=10,
+                   plots=False, log=None)
+    key = ("policy", "run", "scenario", "seed")
+    want = {tuple(e[k] for k in key): e for e in shipped["episodes"]
+            if e["policy"] in POLICIES and e["scenario"] in SCENARIOS}
+    episodes = {tuple(e[k] for k in key): e for e in got["episodes"]}
+    assert set(episodes) == set(want) and len(want) == len(POLICIES) * len(SCENARIOS) * 10
+    compared = 0
+    for k, record in want.items():
+        for name, value in record.items():
+            mine = episodes[k][name]
+            if value is None:  # results.json writes NaN as null
+                assert mine is None or math.isnan(mine), f"{k}: {name} {mine!r}, shipped null"
+            elif name in EXACT or not isinstance(value, float):
+                assert mine == value, f"{k}: {name} {mine!r}, shipped {value!r}"
+            else:
+                assert mine == pytest.approx(value, rel=RTOL), \
+                    f"{k}: {name} {mine!r}, shipped {value!r} (relative {RTOL})"
+                compared += 1
+    assert compared > 400
