@@ -82,3 +82,12 @@ def test_explicit_out_is_written_over_and_says_so(tmp_path, capsys):
     assert f"--out {out}: replacing the results of an earlier evaluation" in \
         capsys.readouterr().out
     assert list(json.loads((out / "results.json").read_text())["policies"]) == ["zero"]
+
+
+def test_library_evaluate_refuses_an_empty_out(tmp_path, monkeypatch):
+    from tether_gym_agents import evaluate
+
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(ValueError, match="out '' is empty"):
+        evaluate(["smc"], "paper", 1, out="", plots=False, log=None)
+    assert list(tmp_path.iterdir()) == []
