@@ -1,12 +1,24 @@
-"""The values of PPO's, SAC's and TQC's hyperparameters, checked before any work is done.
+"""The values of the learning algorithms' hyperparameters, checked before any work is done.
 
-:func:`check_hyperparams` checks every keyword argument of stable-baselines3's PPO and
-SAC (and sb3-contrib's TQC) that a config may set (and ``policy`` and
-``policy_kwargs``), so that a bad value is one line naming the key, the value and what
-is allowed instead of a traceback from stable-baselines3 or torch, or NaNs some updates
-later (``gamma: 2``). Values are checked as YAML gives them (plain data):
-``activation_fn`` is a name from :data:`~tether_gym_agents.files.policy_json.ACTIVATIONS`,
-made a torch class by :func:`activation_class` when the model is built.
+:func:`check_hyperparams` checks every keyword argument of an algorithm of
+:data:`~tether_gym_agents.common.algorithms.ALGORITHMS` (stable-baselines3's PPO, SAC and
+TD3, sb3-contrib's TQC) that a config may set (the row's ``hyperparams``; ``policy`` and
+``policy_kwargs``, the row's ``policy_kwargs``), and the sizes train.py's own keys set
+(``n_envs``), so that a bad value is one line naming the file, the key, the value and
+what is allowed, instead of a traceback from stable-baselines3 or torch, a huge
+allocation, a hang or NaNs some updates later (``gamma: 2``). Values are checked as YAML
+gives them (plain data): ``activation_fn`` is a name from
+:data:`~tether_gym_agents.files.policy_json.ACTIVATIONS`, made a torch class by
+:func:`activation_class` when the model is built.
+
+Bounds that size the run (each refused above, before anything is allocated):
+
+* ``n_envs`` <= :data:`MAX_N_ENVS`; a PPO rollout ``n_steps * n_envs`` and an
+  off-policy ``buffer_size`` <= :data:`MAX_TRANSITIONS`; ``batch_size`` <= the rollout
+  (PPO, with the config's ``n_envs``, default 1) or <= ``buffer_size``.
+* ``learning_rate`` (or ``lin_<start>``) in (0, :data:`MAX_LEARNING_RATE`];
+  ``n_epochs`` and ``gradient_steps`` <= :data:`MAX_UPDATES`; ``n_critics`` and
+  ``n_quantiles`` in the row's ``bounds``.
 """
 
 from __future__ import annotations
@@ -14,16 +26,40 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from ..common.algorithms import Algorithm, algorithm
+from ..files.agent_values import LOG_STD_MAX, LOG_STD_MIN, MAX_PARAMETERS, MAX_WIDTH
 from ..files.agent_values import MAX_DEPTH as MAX_LAYERS
-from ..files.agent_values import MAX_PARAMETERS, MAX_WIDTH, NET_KEYS, TQC_QUANTILES
 from ..files.policy_json import ACTIVATIONS
 
-__all__ = ["MAX_LAYERS", "MAX_WIDTH", "MAX_PARAMETERS", "POLICIES", "check_hyperparams",
-           "activation_class", "activation_name"]
+__all__ = ["MAX_LAYERS", "MAX_WIDTH", "MAX_PARAMETERS", "MAX_N_ENVS", "MAX_TRANSITIONS",
+           "MAX_LEARNING_RATE", "MAX_UPDATES", "POLICIES", "BUFFER_KWARGS",
+           "check_hyperparams", "check_n_envs", "check_rollout", "activation_class",
+           "activation_name"]
 
 POLICIES = ("MlpPolicy",)
 # The network limits are those an agent file may have (files.agent_values): a run can
 # only train what evaluate.py loads (a [200000, 200000] network would need 160 GB).
+
+MAX_N_ENVS = 1024
+"""Most envs train.py steps at once on the CPU. The shipped CPU configs use 8 to 64; the
+native vector env steps all of them in one process, so more envs give no more speed on
+a machine of tens of cores, only larger arrays (1e9 envs asked for 74.5 GiB).
+``train.py gpu`` has its own bound."""
+MAX_TRANSITIONS = 10_000_000
+"""Most transitions a replay buffer (``buffer_size``) or a PPO rollout (``n_steps *
+n_envs``) holds: 10 x SB3's default buffer; with the 20-entry float32 observation (kept
+twice, obs and next obs) about 1.8 GB. 1e12 asked for 72.8 TiB."""
+MAX_LEARNING_RATE = 1.0
+"""Largest learning rate (Adam's step is about the learning rate: above 1 every update
+overshoots; 1e308 gave NaN actions mid-run)."""
+MAX_UPDATES = 1000
+"""Most ``n_epochs`` (PPO passes over each rollout; SB3's default 10) and
+``gradient_steps`` (per rollout of an off-policy algorithm): 1e9 epochs never ends."""
+BUFFER_KWARGS = {"rollout_buffer_kwargs": (), "replay_buffer_kwargs":
+                 ("handle_timeout_termination",)}
+"""The keys a config may give the buffer: the algorithm sets every other argument of
+SB3's RolloutBuffer and ReplayBuffer itself (a repeated or unknown key is a TypeError
+inside stable-baselines3)."""
 
 _UNIT = "a number in [0, 1]"
 
@@ -37,10 +73,12 @@ def _is_number(value) -> bool:
         and math.isfinite(value)
 
 
-def _int_at_least(low: int):
+def _int_at_least(low: int, high: int | None = None):
     def check(value):
-        if isinstance(value, bool) or not isinstance(value, int) or value < low:
-            raise _Bad(f"a whole number >= {low}")
+        if isinstance(value, bool) or not isinstance(value, int) or value < low \
+                or (high is not None and value > high):
+            raise _Bad(f"a whole number >= {low}" if high is None
+                       else f"a whole number in [{low}, {high}]")
     return check
 
 
@@ -80,19 +118,22 @@ def _optional(check):
     return optional
 
 
-def _schedule(value):
-    """A number > 0 or ``lin_<start>`` with a start > 0."""
-    if isinstance(value, str):
-        try:
-            start = float(value[4:]) if value.startswith("lin_") else math.nan
-        except ValueError:
-            start = math.nan
-        if start > 0.0 and math.isfinite(start):
+def _schedule(high: float = math.inf):
+    """A number in (0, high] or ``lin_<start>`` with a start in (0, high]."""
+    def check(value):
+        if isinstance(value, str):
+            try:
+                start = float(value[4:]) if value.startswith("lin_") else math.nan
+            except ValueError:
+                start = math.nan
+            if 0.0 < start <= high:
+                return
+        elif _is_number(value) and 0 < value <= high:
             return
-    elif _is_number(value) and value > 0:
-        return
-    raise _Bad("a number or 'lin_<start>', > 0 and finite ('lin_<start>' falls linearly from "
-               "start to 0 over the run)")
+        bound = "> 0 and finite" if high == math.inf else f"in (0, {high:g}]"
+        raise _Bad(f"a number or 'lin_<start>', {bound} ('lin_<start>' falls linearly from "
+                   "start to 0 over the run)")
+    return check
 
 
 def _sde_sample_freq(value):
@@ -129,49 +170,63 @@ def _train_freq(value):
 
 
 def _gradient_steps(value):
-    if isinstance(value, bool) or not isinstance(value, int) or (value < 1 and value != -1):
-        raise _Bad("a whole number >= 1, or -1 (as many as env steps collected)")
+    if isinstance(value, bool) or not isinstance(value, int) \
+            or not (1 <= value <= MAX_UPDATES or value == -1):
+        raise _Bad(f"a whole number in [1, {MAX_UPDATES}], or -1 (as many as env steps "
+                   "collected)")
 
 
-def _kwargs_dict(value):
-    if value is not None and not isinstance(value, dict):
-        raise _Bad("null or a mapping")
+def _buffer_kwargs(key: str):
+    allowed = BUFFER_KWARGS[key]
+
+    def check(value):
+        if value is not None and not isinstance(value, dict):
+            raise _Bad(f"null or a mapping of {list(allowed)}")
+        unknown = sorted(set(value or {}) - set(allowed))
+        if unknown:
+            raise _Bad(f"null or a mapping of {list(allowed)}; {unknown} not allowed (the "
+                       "algorithm sets the buffer's other arguments itself)")
+        for item in (value or {}).values():
+            _bool(item)
+    return check
 
 
-_COMMON = {
-    "learning_rate": _schedule, "gamma": _unit, "use_sde": _bool,
+_CHECKS: dict[str, Any] = {
+    # every algorithm
+    "learning_rate": _schedule(MAX_LEARNING_RATE), "gamma": _unit, "use_sde": _bool,
     "sde_sample_freq": _sde_sample_freq, "stats_window_size": _int_at_least(1),
+    "batch_size": _int_at_least(1),
+    # on-policy (PPO)
+    "n_epochs": _int_at_least(1, MAX_UPDATES), "gae_lambda": _unit,
+    "clip_range": _schedule(), "clip_range_vf": _optional(_schedule()),
+    "normalize_advantage": _bool, "vf_coef": _number(0.0),
+    "max_grad_norm": _number(0.0, low_open=True),
+    "target_kl": _optional(_number(0.0, low_open=True)), "rollout_buffer_class": _none,
+    "rollout_buffer_kwargs": _buffer_kwargs("rollout_buffer_kwargs"),
+    # off-policy (SAC, TQC, TD3)
+    "buffer_size": _int_at_least(1, MAX_TRANSITIONS), "learning_starts": _int_at_least(0),
+    "tau": _number(0.0, 1.0, low_open=True), "train_freq": _train_freq,
+    "gradient_steps": _gradient_steps, "action_noise": _none, "replay_buffer_class": _none,
+    "replay_buffer_kwargs": _buffer_kwargs("replay_buffer_kwargs"),
+    "optimize_memory_usage": _bool, "target_update_interval": _int_at_least(1),
+    "target_entropy": _target_entropy, "use_sde_at_warmup": _bool,
+    "top_quantiles_to_drop_per_net": _int_at_least(0),
+    "policy_delay": _int_at_least(1, MAX_UPDATES), "target_policy_noise": _number(0.0),
+    "target_noise_clip": _number(0.0),
+    # CapsSAC's/CapsTQC's smoothness weights and perturbation scale (training/caps.py)
+    "caps_temporal": _number(0.0), "caps_spatial": _number(0.0),
+    "caps_magnitude": _number(0.0), "caps_sigma": _number(0.0),
 }
-_CHECKS: dict[str, dict[str, Any]] = {
-    "ppo": {**_COMMON, "n_steps": _int_at_least(1), "batch_size": _int_at_least(2),
-            "n_epochs": _int_at_least(1), "gae_lambda": _unit, "clip_range": _schedule,
-            "clip_range_vf": _optional(_schedule), "normalize_advantage": _bool,
-            "ent_coef": _number(0.0), "vf_coef": _number(0.0),
-            "max_grad_norm": _number(0.0, low_open=True),
-            "target_kl": _optional(_number(0.0, low_open=True)),
-            "rollout_buffer_class": _none, "rollout_buffer_kwargs": _kwargs_dict},
-    "sac": {**_COMMON, "buffer_size": _int_at_least(1), "learning_starts": _int_at_least(0),
-            "batch_size": _int_at_least(1), "tau": _number(0.0, 1.0, low_open=True),
-            "train_freq": _train_freq, "gradient_steps": _gradient_steps,
-            "action_noise": _none, "replay_buffer_class": _none,
-            "replay_buffer_kwargs": _kwargs_dict, "optimize_memory_usage": _bool,
-            "n_steps": _int_at_least(1), "ent_coef": _sac_ent_coef,
-            "target_update_interval": _int_at_least(1), "target_entropy": _target_entropy,
-            "use_sde_at_warmup": _bool,
-            # CapsSAC's smoothness weights and perturbation scale (training/caps.py)
-            "caps_temporal": _number(0.0), "caps_spatial": _number(0.0),
-            "caps_magnitude": _number(0.0), "caps_sigma": _number(0.0)},
+"""The check of each keyword an algorithm of the table may take (its row's
+``hyperparams`` say which it takes; ``n_steps``, ``batch_size`` and ``ent_coef`` depend
+on on/off-policy: :func:`_checks`)."""
+_POLICY_KWARGS: dict[str, Any] = {
+    "log_std_init": _number(LOG_STD_MIN, LOG_STD_MAX), "use_sde": _bool, "use_expln": _bool,
+    "share_features_extractor": _bool, "normalize_images": _bool, "ortho_init": _bool,
+    "full_std": _bool, "squash_output": _bool, "clip_mean": _number(0.0, low_open=True),
 }
-# sb3-contrib's TQC: SAC's arguments and the quantiles each critic drops from the target
-_CHECKS["tqc"] = {**_CHECKS["sac"], "top_quantiles_to_drop_per_net": _int_at_least(0)}
-_POLICY_KWARGS: dict[str, dict[str, Any]] = {
-    "ppo": {"ortho_init": _bool, "full_std": _bool, "squash_output": _bool},
-    "sac": {"clip_mean": _number(0.0, low_open=True), "n_critics": _int_at_least(1)},
-}
-_POLICY_KWARGS["tqc"] = {**_POLICY_KWARGS["sac"], "n_quantiles": _int_at_least(1)}
-_POLICY_KWARGS_COMMON = {"log_std_init": _number(-20.0, 20.0), "use_sde": _bool,
-                         "use_expln": _bool, "share_features_extractor": _bool,
-                         "normalize_images": _bool}
+"""The check of each ``policy_kwargs`` key (its row's ``policy_kwargs`` say which it takes;
+``net_arch``, ``activation_fn``, ``optimizer_kwargs`` and the counts: :func:`_policy_checks`)."""
 _OPTIMIZER = {"eps": _number(0.0, low_open=True), "weight_decay": _number(0.0),
               "amsgrad": _bool}
 
@@ -185,8 +240,8 @@ def _layers(value) -> None:
                    f"[1, {MAX_WIDTH}], with at most {MAX_PARAMETERS} weights between them")
 
 
-def _net_arch(algo: str):
-    nets = NET_KEYS[algo]
+def _net_arch(row: Algorithm):
+    nets = row.net_keys
 
     def check(value):
         if isinstance(value, dict) and value and set(value) <= set(nets):
@@ -247,22 +302,112 @@ def _optimizer_kwargs(value):
             raise _Bad(f"a mapping of {sorted(_OPTIMIZER) + ['betas']}; {key!r} is not one")
 
 
-def _policy_kwargs_checks(algo: str) -> dict[str, Any]:
-    return {"net_arch": _net_arch(algo), "activation_fn": _activation,
-            "optimizer_kwargs": _optimizer_kwargs, **_POLICY_KWARGS_COMMON,
-            **_POLICY_KWARGS[algo]}
+def _ent_coef_ppo(value):
+    _number(0.0)(value)
+
+
+def _checks(row: Algorithm) -> dict[str, Any]:
+    """The check of each keyword ``row``'s model takes (but ``policy_kwargs``)."""
+    out = {key: _CHECKS[key] for key in row.hyperparams if key in _CHECKS}
+    if row.on_policy:
+        out.update(n_steps=_int_at_least(1, MAX_TRANSITIONS),
+                   batch_size=_int_at_least(2, MAX_TRANSITIONS), ent_coef=_ent_coef_ppo)
+    else:  # n_steps: the n-step return of an off-policy algorithm
+        out.update(n_steps=_int_at_least(1, MAX_UPDATES),
+                   batch_size=_int_at_least(1, MAX_TRANSITIONS))
+        if "ent_coef" in row.hyperparams:
+            out["ent_coef"] = _sac_ent_coef
+    return {key: check for key, check in out.items() if key in row.hyperparams}
+
+
+def _policy_checks(row: Algorithm) -> dict[str, Any]:
+    """The check of each ``policy_kwargs`` key ``row``'s policy takes."""
+    out: dict[str, Any] = {"net_arch": _net_arch(row), "activation_fn": _activation,
+                           "optimizer_kwargs": _optimizer_kwargs}
+    out.update({key: _POLICY_KWARGS[key] for key in row.policy_kwargs if key in _POLICY_KWARGS})
+    for key, default in row.defaults.items():  # n_critics, n_quantiles
+        out[key] = _int_at_least(*row.bounds.get(key, (1, default)))
+    return {key: check for key, check in out.items() if key in row.policy_kwargs}
+
+
+def check_n_envs(value, where: str) -> None:
+    """``n_envs`` (a config's or ``--n-envs``): a whole number in [1, :data:`MAX_N_ENVS`].
+
+    Raises
+    ------
+    ValueError
+        ``"<where>: <value> must be a whole number in [1, 1024] ..."``.
+    """
+    whole = (isinstance(value, (int, float)) and not isinstance(value, bool)
+             and math.isfinite(value) and value == int(value))
+    if not whole or not 1 <= value <= MAX_N_ENVS:
+        raise ValueError(f"{where}: {value!r} must be a whole number in [1, {MAX_N_ENVS}] "
+                         "(envs stepped at once on the CPU; train.py gpu takes more)")
+
+
+def check_rollout(params: dict, algo: str, n_envs: int, source: str) -> None:
+    """The sizes of one update, checked before anything is allocated.
+
+    A PPO rollout ``n_steps * n_envs`` of at most :data:`MAX_TRANSITIONS` and at least
+    ``batch_size``; an off-policy ``batch_size`` of at most ``buffer_size``. ``params`` as
+    a run uses them (after ``fit_rollout``), with the run's ``n_envs``.
+
+    Raises
+    ------
+    ValueError
+        Naming ``source``, the keys, their values and the allowed range.
+    """
+    row = algorithm(algo)
+    batch = params.get("batch_size", 64 if row.on_policy else 256)
+    if not _whole(batch) or not _whole(n_envs):
+        return  # reported by check_hyperparams
+    if row.on_policy:
+        n_steps = params.get("n_steps", 2048)
+        if not _whole(n_steps):
+            return
+        rollout = n_steps * n_envs
+        if rollout > MAX_TRANSITIONS:
+            raise ValueError(f"{source}: n_steps x n_envs: {n_steps} x {n_envs} = {rollout} "
+                             f"must be <= {MAX_TRANSITIONS} (env steps in one rollout)")
+        if batch > rollout:
+            raise ValueError(f"{source}: batch_size: {batch} must be <= n_steps x n_envs = "
+                             f"{n_steps} x {n_envs} = {rollout} (the rollout it is drawn from)")
+    else:
+        size = params.get("buffer_size", 1_000_000)
+        if _whole(size) and batch > size:
+            raise ValueError(f"{source}: batch_size: {batch} must be <= buffer_size ({size}), "
+                             "the replay buffer it is drawn from")
+
+
+def _whole(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _non_finite(value, where: str):
+    """The first NaN or inf in plain data (``where`` its key path), or None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return where, value
+    items = value.items() if isinstance(value, dict) else (
+        enumerate(value) if isinstance(value, list) else ())
+    for key, item in items:
+        found = _non_finite(item, f"{where}[{key}]" if isinstance(key, int) else
+                            f"{where}.{key}")
+        if found:
+            return found
+    return None
 
 
 def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None:
-    """Raise ValueError naming the first value of ``params`` that PPO/SAC would reject.
+    """Raise ValueError naming the first value of ``params`` the algorithm would reject.
 
     Parameters
     ----------
     params : dict
-        The algorithm's keyword arguments as read from YAML (``policy_kwargs`` included;
-        keys not listed here, such as train.py's own, are left to the caller).
+        The config's keys as read from YAML (the algorithm's keywords, ``policy_kwargs``
+        included, and train.py's own keys, of which ``n_envs`` and the NaN/inf in
+        ``env_kwargs`` and ``normalize`` are checked here; the others by the caller).
     algo : str
-        ``"ppo"``, ``"sac"`` or ``"tqc"``.
+        A name of :data:`~tether_gym_agents.common.algorithms.ALGORITHMS`.
     source : str
         The file the values came from (the start of the message).
     policy : str or None
@@ -273,33 +418,38 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
     ValueError
         ``"<source>: <key>: <value> must be <allowed>"``.
     """
+    row = algorithm(algo)
     if policy is not None and policy not in POLICIES:
         raise ValueError(f"{source}: policy: {policy!r} must be one of {list(POLICIES)} (the "
                          "observation is a flat vector)")
-    for key, check in _CHECKS[algo].items():
+    for key in ("env_kwargs", "normalize"):  # JSON would record NaN as null
+        found = _non_finite(params.get(key), key)
+        if found:
+            raise ValueError(f"{source}: {found[0]}: {found[1]!r} must be finite")
+    if "n_envs" in params:
+        check_n_envs(params["n_envs"], f"{source}: n_envs")
+    for key, check in _checks(row).items():
         if key in params:
             _run(check, f"{source}: {key}", params[key])
-    if algo == "tqc":
-        _tqc_keeps_quantiles(params, source)
     kwargs = params.get("policy_kwargs")
-    if kwargs is None:
-        return
-    if not isinstance(kwargs, dict):
+    if kwargs is not None and not isinstance(kwargs, dict):
         raise ValueError(f"{source}: policy_kwargs: {kwargs!r} must be a mapping (no code is "
                          "evaluated)")
-    checks = _policy_kwargs_checks(algo)
-    for key, value in kwargs.items():
+    checks = _policy_checks(row)
+    for key, value in (kwargs or {}).items():
         if key not in checks:
             raise ValueError(f"{source}: policy_kwargs: unknown key {key!r} for "
                              f"{algo.upper()}; allowed: {sorted(checks)}")
         _run(checks[key], f"{source}: policy_kwargs.{key}", value)
+    if "n_quantiles" in row.defaults and "top_quantiles_to_drop_per_net" in row.hyperparams:
+        _keeps_quantiles(params, row, source)
+    check_rollout(params, algo, int(params.get("n_envs", 1)), source)
 
 
-def _tqc_keeps_quantiles(params: dict, source: str) -> None:
+def _keeps_quantiles(params: dict, row: Algorithm, source: str) -> None:
     """TQC's target keeps n_quantiles - top_quantiles_to_drop_per_net > 0 per critic."""
-    kwargs = params.get("policy_kwargs")
-    n_quantiles = (kwargs.get("n_quantiles", TQC_QUANTILES) if isinstance(kwargs, dict)
-                   else TQC_QUANTILES)
+    kwargs = params.get("policy_kwargs") or {}
+    n_quantiles = kwargs.get("n_quantiles", row.defaults["n_quantiles"])
     drop = params.get("top_quantiles_to_drop_per_net", 2)
     if isinstance(n_quantiles, int) and isinstance(drop, int) and drop >= n_quantiles:
         raise ValueError(f"{source}: top_quantiles_to_drop_per_net: {drop!r} must be < "
