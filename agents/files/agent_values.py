@@ -32,11 +32,11 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from ..common.algorithms import ALGORITHMS, algorithm
+from ..common.algorithms import algorithm
 
-__all__ = ["ValueProblem", "TQC_QUANTILES", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS",
+__all__ = ["ValueProblem", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS",
            "MAX_SPACE_SIZE", "MAX_SPACE_DIMS", "MAX_OBS_MEAN", "MAX_OBS_VAR", "LOG_STD_MIN",
-           "LOG_STD_MAX", "WEIGHT_DTYPES", "NET_KEYS", "check_values", "check_weights",
+           "LOG_STD_MAX", "WEIGHT_DTYPES", "check_values", "check_weights",
            "tether_gym_env_ids"]
 
 MAX_WIDTH = 4096
@@ -62,10 +62,6 @@ units, far beyond any action box)."""
 WEIGHT_DTYPES = ("float32", "float64")
 """The dtypes of the tensors ``save_agent`` writes (the policy's own; loading never casts:
 int8, bool or float16 weights would be cast silently into another policy)."""
-NET_KEYS = {name: row.net_keys for name, row in ALGORITHMS.items()}
-"""The networks a mapping ``net_arch`` may name, per algorithm (from the table)."""
-TQC_QUANTILES = ALGORITHMS["tqc"].defaults["n_quantiles"]
-"""sb3-contrib's default ``n_quantiles``: the outputs of each TQC critic."""
 
 
 class ValueProblem(ValueError):
