@@ -9,11 +9,10 @@ Evaluate a controller of your own beside the shipped ones: register it with
 through :func:`tether_gym_agents.cli.evaluate.main`). Importing the package loads
 neither torch nor stable-baselines3.
 
-Subpackages, from the bottom up (imports only go down): ``common`` (observation layout,
-env arguments, JSON helpers), ``baselines`` (sliding-mode and open-loop laws),
-``hybrids`` (safety filter around a policy, residual RL, handover), ``files`` (agent
-files and run folders), ``evaluation`` and ``training``, ``paper`` (the paper's
-figures), ``cli`` (``evaluate.py``, ``train.py``).
+Subpackages, from the bottom up (imports only go down): ``common``, ``baselines``,
+``hybrids``, ``files``, then ``evaluation``, ``training`` and ``accel`` (siblings),
+``paper``, ``cli``. What each holds, module by module: the diagram of
+docs/architecture.md (the one list of modules).
 """
 
 from .baselines.open_loop import AngleSource, PeriodicReel, RandomPolicy, ZeroStateReel
