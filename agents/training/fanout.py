@@ -204,7 +204,8 @@ def init_ray(address: str | None = None) -> bool:
     if failure is None:
         sys.stderr.write(said.text)  # a connected cluster's warnings are shown
         return True
-    last = [line for line in said.text.splitlines() if line.strip()][-1:]
+    # Ray's own log lines ("[2026-01-01 12:00:00,000 W 123 123] file.cc:85: ..."), the last
+    last = [line for line in said.text.splitlines() if line.startswith("[20")][-1:]
     raise ConfigError(
         f"cannot connect to the Ray cluster at --ray-address/RAY_ADDRESS {address!r} "
         f"({type(failure).__name__}: {(str(failure) or 'no answer').splitlines()[0]}"
