@@ -52,6 +52,8 @@ RANDOM_INIT = {"initial_theta": (0.0, 0.0), "init_theta_range": 0.15, "init_dthe
 """theta_i(0) uniform in +-0.15 rad, theta_i'(0) within +-0.1 of the reference rate."""
 
 
+NOMINAL_KEYS = ("masses", "eccentricity", "reel_time_constant", "accel_limit")
+
 PER_TETHER_KEYS = ("initial_theta", "masses")
 """Scenario arguments with one entry per tether (see :func:`per_tether`)."""
 
@@ -102,6 +104,19 @@ def _n_bodies(kwargs: dict) -> int | None:
     return None
 
 
+def _check_nominal(nominal: dict, where: str) -> None:
+    """Raise ValueError unless the nominal model's values are ones the env accepts."""
+    from tether_gym.envs import EnvConfig
+    from tether_gym.params import check_masses
+
+    try:
+        if "masses" in nominal:
+            check_masses(nominal["masses"])
+        EnvConfig.from_kwargs(**{k: v for k, v in nominal.items() if k != "masses"})
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{where}: nominal {exc}") from None
+
+
 @dataclass(frozen=True)
 class Scenario:
     """One benchmark scenario.
@@ -125,6 +140,15 @@ class Scenario:
     description: str
     env_kwargs: dict = field(default_factory=dict)
     nominal: dict | None = None
+
+    def __post_init__(self) -> None:
+        """A nominal model's keys and values are checked as the env checks them."""
+        if self.nominal is None:
+            return
+        if not isinstance(self.nominal, dict) or not set(self.nominal) <= set(NOMINAL_KEYS):
+            raise ValueError(f"scenario {self.name!r}: nominal must be a mapping of one or "
+                             f"more of the keys {list(NOMINAL_KEYS)}, got {self.nominal!r}")
+        _check_nominal(self.nominal, f"scenario {self.name!r}")
 
     def env_kwargs_with(self, overrides: dict | None = None, base: dict | None = None) -> dict:
         """The scenario's env arguments with ``overrides`` (``--env-kwargs``) on top.
@@ -242,7 +266,6 @@ SUITES = {"default": DEFAULT_SUITE, "paper": (PAPER_SCENARIO,), "beyond": BEYOND
 
 
 SCENARIO_KEYS = ("name", "description", "env_kwargs", "nominal")
-NOMINAL_KEYS = ("masses", "eccentricity", "reel_time_constant", "accel_limit")
 
 
 def get_suite(name: str) -> tuple[Scenario, ...]:
@@ -315,19 +338,6 @@ def load_suite_file(path) -> tuple[Scenario, ...]:
         out.append(Scenario(name, str(item.get("description", "")), _tuples(env_kwargs),
                             _tuples(nominal)))
     return tuple(out)
-
-
-def _check_nominal(nominal: dict, where: str) -> None:
-    """Raise ValueError unless the nominal model's values are ones the env accepts."""
-    from tether_gym.envs import EnvConfig
-    from tether_gym.params import check_masses
-
-    try:
-        if "masses" in nominal:
-            check_masses(nominal["masses"])
-        EnvConfig.from_kwargs(**{k: v for k, v in nominal.items() if k != "masses"})
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{where}: nominal {exc}") from None
 
 
 def describe_suites() -> str:

@@ -89,3 +89,14 @@ def test_suite_nominal_values_are_checked_when_read(tmp_path, capsys):
     suite.write_text("scenarios:\n- name: a\n  description: [1, 2]\n")
     assert evaluate_main(["smc", "--suite", str(suite), "--out", str(tmp_path / "o")]) == 2
     assert "'description' must be a string" in capsys.readouterr().err
+
+
+def test_scenario_of_user_code_checks_its_nominal_model():
+    from tether_gym_agents.evaluation.scenarios import Scenario
+
+    with pytest.raises(ValueError, match="scenario 's': nominal masses='abc' must be"):
+        Scenario("s", "", {}, {"masses": "abc"})
+    with pytest.raises(ValueError, match="scenario 's': nominal must be a mapping"):
+        Scenario("s", "", {}, {"mass": (1.0, 2.0)})
+    assert Scenario("s", "", {}, {"masses": (1.0, 2.0)}).for_bodies(4).nominal == {
+        "masses": (1.0, 1.0, 1.0)}
