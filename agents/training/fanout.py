@@ -15,9 +15,13 @@ Where the tasks run
     (``num_cpus=os.cpu_count()``, no dashboard, no token authentication: it is this
     user's, on this machine), stopped at the end; its processes also end when the
     driver is killed (``kill -9`` included: :mod:`.ray_reaper`).
-    ``--ray-address auto|HOST:PORT`` (or the ``RAY_ADDRESS`` environment variable)
-    connects to an existing cluster instead; an address nothing answers on is an
-    error within :data:`CONNECT_TIMEOUT_S` seconds. Each task asks for ``--torch-threads``
+    ``--ray-address auto|local|HOST:PORT|ray://HOST:PORT`` (or the ``RAY_ADDRESS``
+    environment variable; another form is an error before Ray is imported) connects to
+    an existing cluster instead (``local``: the local instance above); an address
+    nothing answers on is an error within :data:`CONNECT_TIMEOUT_S` seconds, one that
+    answers but is no Ray cluster within :data:`GCS_PROBE_S` (``HOST:PORT``; a
+    ``ray://`` address is left to Ray's client, about 30 s), in one line without Ray's
+    log lines. Each task asks for ``--torch-threads``
     CPUs (default 1) and runs with that many torch threads and one numba thread
     (``NUMBA_NUM_THREADS=1``, ``OMP_NUM_THREADS=1`` and ``MKL_NUM_THREADS=1``: the
     local workers inherit them, a cluster's get them as the job's runtime
