@@ -109,9 +109,10 @@ def build_parser() -> argparse.ArgumentParser:
     fan.add_argument("--seeds", type=int, default=None, metavar="N",
                      help="train seeds --seed ... --seed+N-1 into <out>/seed_K/, one Ray task "
                           "each; re-running skips finished seeds and resumes interrupted ones")
-    fan.add_argument("--ray-address", default=None, metavar="auto|HOST:PORT",
-                     help="existing Ray cluster (default: $RAY_ADDRESS, else a local instance "
-                          "with one CPU per run)")
+    fan.add_argument("--ray-address", default=None, metavar="ADDRESS",
+                     help="existing Ray cluster: auto, HOST:PORT or ray://HOST:PORT; local "
+                          "for a new local instance (default: $RAY_ADDRESS, else a local "
+                          "instance with one CPU per run)")
     fan.add_argument("--sweep", type=Path, default=None, metavar="FILE.yml",
                      help="search config keys x several seeds per trial, rank by the median "
                           "final evaluation return (file format: tether_gym_agents.training.sweep)")
