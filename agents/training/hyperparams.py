@@ -32,7 +32,8 @@ from ..files.agent_values import MAX_DEPTH as MAX_LAYERS
 from ..files.policy_json import ACTIVATIONS
 
 __all__ = ["MAX_LAYERS", "MAX_WIDTH", "MAX_PARAMETERS", "MAX_N_ENVS", "MAX_TRANSITIONS",
-           "MAX_LEARNING_RATE", "MAX_UPDATES", "POLICIES", "BUFFER_KWARGS",
+           "MAX_LEARNING_RATE", "MAX_UPDATES", "MAX_LOSS_WEIGHT", "MAX_NOISE", "POLICIES",
+           "BUFFER_KWARGS",
            "check_hyperparams", "check_n_envs", "check_rollout", "activation_class",
            "activation_name"]
 
@@ -55,6 +56,13 @@ overshoots; 1e308 gave NaN actions mid-run)."""
 MAX_UPDATES = 1000
 """Most ``n_epochs`` (PPO passes over each rollout; SB3's default 10) and
 ``gradient_steps`` (per rollout of an off-policy algorithm): 1e9 epochs never ends."""
+MAX_LOSS_WEIGHT = 1000.0
+"""Largest weight of a loss term (``vf_coef``, ``ent_coef``, the ``caps_*`` weights):
+SB3's defaults are 0 to 1; 1e300 made the loss infinite and the actions NaN mid-run."""
+MAX_NOISE = 10.0
+"""Largest TD3 target noise (``target_policy_noise``, ``target_noise_clip``) and CAPS
+perturbation ``caps_sigma``: the policy's actions lie in [-1, 1] and its observations are
+normalised to a few units; 1e300 overflowed float32 mid-run."""
 BUFFER_KWARGS = {"rollout_buffer_kwargs": (), "replay_buffer_kwargs":
                  ("handle_timeout_termination",)}
 """The keys a config may give the buffer: the algorithm sets every other argument of
@@ -150,11 +158,12 @@ def _sac_ent_coef(value):
                 start = float(value[5:])
             except ValueError:
                 start = math.nan
-            if start > 0 and math.isfinite(start):
+            if 0 < start <= MAX_LOSS_WEIGHT:
                 return
-    elif _is_number(value) and value >= 0:
+    elif _is_number(value) and 0 <= value <= MAX_LOSS_WEIGHT:
         return
-    raise _Bad("a finite number >= 0, 'auto' or 'auto_<initial value>' with a value > 0")
+    raise _Bad(f"a number in [0, {MAX_LOSS_WEIGHT:g}], 'auto' or 'auto_<initial value>' with "
+               f"a value in (0, {MAX_LOSS_WEIGHT:g}]")
 
 
 def _target_entropy(value):
@@ -199,7 +208,7 @@ _CHECKS: dict[str, Any] = {
     # on-policy (PPO)
     "n_epochs": _int_at_least(1, MAX_UPDATES), "gae_lambda": _unit,
     "clip_range": _schedule(), "clip_range_vf": _optional(_schedule()),
-    "normalize_advantage": _bool, "vf_coef": _number(0.0),
+    "normalize_advantage": _bool, "vf_coef": _number(0.0, MAX_LOSS_WEIGHT),
     "max_grad_norm": _number(0.0, low_open=True),
     "target_kl": _optional(_number(0.0, low_open=True)), "rollout_buffer_class": _none,
     "rollout_buffer_kwargs": _buffer_kwargs("rollout_buffer_kwargs"),
@@ -211,11 +220,13 @@ _CHECKS: dict[str, Any] = {
     "optimize_memory_usage": _bool, "target_update_interval": _int_at_least(1),
     "target_entropy": _target_entropy, "use_sde_at_warmup": _bool,
     "top_quantiles_to_drop_per_net": _int_at_least(0),
-    "policy_delay": _int_at_least(1, MAX_UPDATES), "target_policy_noise": _number(0.0),
-    "target_noise_clip": _number(0.0),
+    "policy_delay": _int_at_least(1, MAX_UPDATES),
+    "target_policy_noise": _number(0.0, MAX_NOISE),
+    "target_noise_clip": _number(0.0, MAX_NOISE),
     # CapsSAC's/CapsTQC's smoothness weights and perturbation scale (training/caps.py)
-    "caps_temporal": _number(0.0), "caps_spatial": _number(0.0),
-    "caps_magnitude": _number(0.0), "caps_sigma": _number(0.0),
+    "caps_temporal": _number(0.0, MAX_LOSS_WEIGHT),
+    "caps_spatial": _number(0.0, MAX_LOSS_WEIGHT),
+    "caps_magnitude": _number(0.0, MAX_LOSS_WEIGHT), "caps_sigma": _number(0.0, MAX_NOISE),
 }
 """The check of each keyword an algorithm of the table may take (its row's
 ``hyperparams`` say which it takes; ``n_steps``, ``batch_size`` and ``ent_coef`` depend
@@ -227,7 +238,7 @@ _POLICY_KWARGS: dict[str, Any] = {
 }
 """The check of each ``policy_kwargs`` key (its row's ``policy_kwargs`` say which it takes;
 ``net_arch``, ``activation_fn``, ``optimizer_kwargs`` and the counts: :func:`_policy_checks`)."""
-_OPTIMIZER = {"eps": _number(0.0, low_open=True), "weight_decay": _number(0.0),
+_OPTIMIZER = {"eps": _number(0.0, 1.0, low_open=True), "weight_decay": _number(0.0, 1.0),
               "amsgrad": _bool}
 
 
@@ -303,7 +314,7 @@ def _optimizer_kwargs(value):
 
 
 def _ent_coef_ppo(value):
-    _number(0.0)(value)
+    _number(0.0, MAX_LOSS_WEIGHT)(value)
 
 
 def _checks(row: Algorithm) -> dict[str, Any]:

@@ -1,11 +1,13 @@
 """Training settings out of bounds (issue 33): each is one line naming the config file, the
 key, the value and the allowed range, exit 2, before anything is allocated or trained.
 
-Before: ``n_envs: 1000000000`` / ``buffer_size: 1000000000000`` asked for 74.5 GiB / 72.8 TiB,
-``learning_rate: 1.0e+308`` gave NaN actions mid-run, unknown buffer keys a TypeError from
-stable-baselines3, ``n_epochs: 1000000000`` and ``n_critics: 1000000`` hung, a batch larger
-than the rollout or the buffer was accepted, and ``env_kwargs: {eccentricity: .nan}`` was
-reported as "got NoneType None" (train.py records env kwargs as JSON, where NaN becomes null).
+Before: ``n_envs: 1000000000`` / ``buffer_size: 1000000000000`` asked for 74.5 GiB /
+72.8 TiB; ``learning_rate: 1.0e+308``, ``vf_coef``, ``ent_coef``, ``caps_temporal`` or
+TD3's target noise of 1e300 gave NaN actions or an overflow mid-run; unknown buffer keys
+a TypeError from stable-baselines3; ``n_epochs: 1000000000`` and ``n_critics: 1000000``
+hung; a batch larger than the rollout or the buffer was accepted; and ``env_kwargs:
+{eccentricity: .nan}`` was reported as "got NoneType None" (train.py records env kwargs
+as JSON, where NaN becomes null).
 """
 
 from __future__ import annotations
@@ -66,6 +68,23 @@ HOSTILE = {  # case: (algo, YAML lines under the env id, expected message after 
                       "normalize.clip_obs: nan must be finite"),
     "nan learning_rate": ("td3", "learning_rate: .nan",
                           "learning_rate: nan must be a number"),
+    "vf_coef 1e300": ("ppo", "vf_coef: 1.0e+300",
+                      "vf_coef: 1e+300 must be a finite number >= 0 and <= 1000"),
+    "ent_coef ppo 1e300": ("ppo", "ent_coef: 1.0e+300",
+                           "ent_coef: 1e+300 must be a finite number >= 0 and <= 1000"),
+    "ent_coef sac 1e300": ("sac", "ent_coef: 1.0e+300",
+                           "ent_coef: 1e+300 must be a number in [0, 1000], 'auto'"),
+    "ent_coef auto_1e300": ("tqc", "ent_coef: auto_1e300", "ent_coef: 'auto_1e300' must be"),
+    "caps_temporal 1e300": ("sac", "caps_temporal: 1.0e+300",
+                            "caps_temporal: 1e+300 must be a finite number >= 0 and <= 1000"),
+    "caps_sigma 1e300": ("tqc", "caps_sigma: 1.0e+300",
+                         "caps_sigma: 1e+300 must be a finite number >= 0 and <= 10"),
+    "target_noise_clip 1e300": ("td3", "target_noise_clip: 1.0e+300",
+                                "target_noise_clip: 1e+300 must be a finite number >= 0 and "
+                                "<= 10"),
+    "weight_decay 1e300": ("ppo", "policy_kwargs: {optimizer_kwargs: {weight_decay: 1.0e+300}}",
+                           "policy_kwargs.optimizer_kwargs: {'weight_decay': 1e+300} must be "
+                           "weight_decay: a finite number >= 0 and <= 1"),
     "policy_delay": ("td3", "policy_delay: 0", "policy_delay: 0 must be a whole number in"),
     "target_policy_noise": ("td3", "target_policy_noise: -1",
                             "target_policy_noise: -1 must be a finite number >= 0"),
