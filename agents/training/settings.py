@@ -39,6 +39,7 @@ from .config import (
     residual_spec,
     resolve_env_kwargs,
 )
+from .hyperparams import check_n_envs, check_rollout
 
 __all__ = ["ALGOS", "SEED_MAX", "ConfigError", "TrainOptions", "TrainSettings",
            "resolve_settings", "check_ray_address", "RAY_ADDRESS_FORMS"]
@@ -331,6 +332,7 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
         params, fitted = fit_rollout(params, options.algo, counts["n_envs"],
                                      counts["timesteps"])
         notes += [fitted] if fitted else []
+    _check_sizes(params, options, counts["n_envs"], source)
     _check_out(out)
     if residual is not None:
         run["residual"] = residual.to_dict()
@@ -394,6 +396,20 @@ def _read_params(options: TrainOptions, out: Path) -> tuple[dict, str]:
     if not isinstance(saved.get("hyperparams"), dict):
         raise ConfigError(f"--resume: {resolved} records no hyperparams")
     return dict(saved["hyperparams"]), str(resolved)
+
+
+def _check_sizes(params: dict, options: TrainOptions, n_envs: int, source: str) -> None:
+    """``n_envs`` and the rollout or batch a run uses, within bounds before any allocation.
+
+    The config's ``n_envs`` was checked with its file; ``--n-envs`` is checked here, and
+    the rollout ``n_steps x n_envs`` (PPO, after :func:`~.config.fit_rollout`) or the
+    batch within the buffer (off-policy) with the ``n_envs`` the run uses.
+    """
+    try:
+        check_n_envs(n_envs, "--n-envs" if options.n_envs is not None else f"{source}: n_envs")
+        check_rollout(params, options.algo, n_envs, source)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def _check_out(out: Path) -> None:
