@@ -20,14 +20,15 @@ from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from ..common.features import FeatureSpec
 from ..common.jsonio import to_jsonable
 from ..common.obs import with_rate_mode
+from ..common.yamlio import YamlFileError, load_yaml_file
 from ..hybrids.residual_spec import ResidualSpec
 from .hyperparams import activation_class, check_hyperparams
 
 __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_KEYS",
            "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
-           "check_env_id", "algo_class", "check_algo_params", "fit_rollout", "NOISE_TYPES",
-           "NOISE_STD_MAX", "action_noise"]
+           "check_env_id", "algo_class", "check_algo_params", "check_counts", "fit_rollout",
+           "NOISE_TYPES", "NOISE_STD_MAX", "action_noise"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
@@ -198,16 +199,11 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
         On a missing file, a malformed document or an unknown key (the message lists
         the valid keys).
     """
-    import yaml
-
     path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file {str(path)!r} does not exist")
-    with open(path) as fh:
-        try:
-            doc = yaml.safe_load(fh) or {}
-        except yaml.YAMLError as exc:
-            raise ConfigError(f"{path} is not valid YAML: {exc}") from exc
+    try:
+        doc = load_yaml_file(path, what="config file") or {}
+    except YamlFileError as exc:
+        raise ConfigError(str(exc)) from None
     if not isinstance(doc, dict) or not all(isinstance(v, (dict, type(None)))
                                             for v in doc.values()):
         raise ConfigError(f"{path} must map env ids (and 'default') to hyperparameters")
@@ -229,12 +225,7 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
             raise ConfigError(f"unknown normalize key(s) {bad}; valid: {list(NORMALIZE_KEYS)}")
     elif not isinstance(norm, bool):
         raise ConfigError(f"normalize must be true, false or a dict, got {norm!r}")
-    for key in ("n_envs", "n_timesteps", "eval_freq", "checkpoint_freq"):
-        if key in params:
-            value = params[key]
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or value < 1 \
-                    or value != int(value):
-                raise ConfigError(f"{path}: {key}: {value!r} must be a whole number >= 1")
+    check_counts(params, str(path))
     if not isinstance(params.get("env_kwargs") or {}, dict):
         raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")
     check_algo_params(params, algo, str(path))
@@ -243,6 +234,25 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
     if "features" in params:
         feature_spec(params["features"], str(path))
     return params
+
+
+def check_counts(params: dict, source: str) -> None:
+    """``n_envs``, ``n_timesteps``, ``eval_freq``, ``checkpoint_freq``: whole numbers >= 1.
+
+    A float that is whole (``1e5``) is accepted; NaN and inf are refused before any
+    conversion to int.
+
+    Raises
+    ------
+    ConfigError
+        ``"<source>: <key>: <value> must be a whole number >= 1"``.
+    """
+    for key in ("n_envs", "n_timesteps", "eval_freq", "checkpoint_freq"):
+        if key in params:
+            value = params[key]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) \
+                    or not math.isfinite(value) or value < 1 or value != int(value):
+                raise ConfigError(f"{source}: {key}: {value!r} must be a whole number >= 1")
 
 
 def residual_spec(value, source: str) -> ResidualSpec | None:

@@ -29,6 +29,7 @@ from .config import (
     RUN_KEYS,
     ConfigError,
     check_algo_params,
+    check_counts,
     check_env,
     check_env_id,
     feature_spec,
@@ -304,6 +305,7 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
     out = Path(options.out) if options.out is not None else Path("runs") / options.algo
     params, source = _read_params(options, out)
     check_algo_params(params, options.algo, source)
+    check_counts(params, source)  # a run's config.yml too: int(nan) below would raise
     run = {k: params.pop(k) for k in RUN_KEYS if k in params}
     if "policy_kwargs" in params and not isinstance(params["policy_kwargs"], dict):
         raise ConfigError(f"{source}: policy_kwargs must be a mapping, not "

@@ -51,3 +51,69 @@ def test_rollout_of_the_option_n_envs_is_bounded(tmp_path, capsys, no_training, 
     assert main(["--config", str(config), "--out", str(out), "--no-progress", *args]) == 2
     assert _one_line(capsys).startswith(f"train.py: error: {config}: {message}")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("line, value", [("n_envs: .nan", "nan"), ("n_envs: .inf", "inf"),
+                                         ("n_timesteps: .nan", "nan"),
+                                         ("eval_freq: -.inf", "-inf")])
+def test_non_finite_counts_in_a_config_are_one_line(tmp_path, capsys, no_training, line,
+                                                    value):
+    """Before: ``ValueError: cannot convert float NaN to integer`` / ``OverflowError``."""
+    config = tmp_path / "nan.yml"
+    config.write_text(f"{ENV}:\n  {line}\n")
+    assert main(["--config", str(config), "--out", str(tmp_path / "run"), "--timesteps", "64",
+                 "--no-progress"]) == 2
+    key = line.split(":")[0]
+    assert _one_line(capsys) == (f"train.py: error: {config}: {key}: {value} must be a whole "
+                                 "number >= 1")
+
+
+def test_config_file_is_read_with_the_yaml_limits(tmp_path, capsys, no_training):
+    """Before: an alias was expanded (and a FIFO was reported as 'does not exist')."""
+    import os
+
+    config = tmp_path / "alias.yml"
+    config.write_text(f"default: &d {{n_envs: 1}}\n{ENV}: *d\n")
+    args = ["--out", str(tmp_path / "run"), "--timesteps", "64", "--no-progress"]
+    assert main(["--config", str(config), *args]) == 2
+    err = _one_line(capsys)
+    assert f"config file {config}" in err and "anchors and aliases" in err, err
+    fifo = tmp_path / "fifo.yml"
+    os.mkfifo(fifo)
+    assert main(["--config", str(fifo), *args]) == 2
+    assert _one_line(capsys) == (f"train.py: error: config file {fifo} is not a regular file "
+                                 "(a FIFO)")
+
+
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory):
+    """A finished 64-step PPO run folder (copy it before changing it)."""
+    out = tmp_path_factory.mktemp("tiny") / "run"
+    assert main(["--timesteps", "64", "--n-envs", "1", "--eval-episodes", "1",
+                 "--out", str(out), "--no-progress"]) == 0
+    return out
+
+
+def _copy(run, tmp_path):
+    import shutil
+
+    out = tmp_path / "run"
+    shutil.copytree(run, out, symlinks=True)
+    return out
+
+
+def _edit_config(out, old: str, new: str) -> None:
+    path = out / "config.yml"
+    text = path.read_text()
+    assert old in text
+    path.write_text(text.replace(old, new, 1))
+
+
+def test_resume_with_non_finite_count_in_config_yml_is_one_line(tiny_run, tmp_path, capsys,
+                                                                no_training):
+    """Before: ``ValueError: cannot convert float NaN to integer``."""
+    out = _copy(tiny_run, tmp_path)
+    _edit_config(out, "  n_timesteps: 3000000\n", "  n_timesteps: .nan\n")
+    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    assert _one_line(capsys) == (f"train.py: error: {out / 'config.yml'}: n_timesteps: nan "
+                                 "must be a whole number >= 1")
