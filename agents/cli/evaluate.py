@@ -39,6 +39,7 @@ from ..evaluation.benchmark import (
 from ..evaluation.registry import BASELINES, default_policies, resolve_policy
 from ..evaluation.results import markdown_tables
 from ..evaluation.scenarios import describe_suites, get_suite
+from ..files.trained import refuse_special_file
 
 __all__ = ["main", "build_parser"]
 
@@ -62,6 +63,10 @@ NOTES = (
     "Reproduce the paper instead: evaluate.py paper --out DIR (alias: evaluate.py "
     "--paper --out DIR).")
 
+SEEDS_HELP = (f"episodes per scenario and policy (env seeds --seed ... --seed+K-1; per "
+              f"training run of a folder of seed runs), 1 ... {MAX_SEEDS} (default 10); not "
+              "train.py's --seeds (training runs)")
+
 
 def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     parser.add_argument("policies", nargs="*",
@@ -78,8 +83,7 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
                         help="env arguments applied on top of every scenario (and over "
                              "what trained agents were trained on), as Python literals, e.g. "
                              "n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
-    parser.add_argument("--seeds", type=int, default=10,
-                        help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
+    parser.add_argument("--seeds", type=int, default=10, metavar="K", help=SEEDS_HELP)
     parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
     parser.add_argument("--out", default=None,
                         help="folder for results.json and plots (default: a new folder "
@@ -133,8 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="folders of seed_K run folders written by train.py, or output "
                              "folders of this command (their curves.json)")
     curves.add_argument("--suite", default="default", help="scenario suite (default: default)")
-    curves.add_argument("--seeds", type=int, default=10,
-                        help=f"episodes per scenario and run, 1 ... {MAX_SEEDS} (default 10)")
+    curves.add_argument("--seeds", type=int, default=10, metavar="K", help=SEEDS_HELP)
     curves.add_argument("--rms", type=float, default=5.5e-3,
                         help="threshold tracking RMS [rad] (default 5.5e-3)")
     curves.add_argument("--success", type=float, default=0.99,
@@ -163,8 +166,8 @@ def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
     check_int("--torch-threads", args.torch_threads, 1, MAX_TORCH_THREADS)
     get_suite(args.suite)
     policies = args.policies or default_policies()
-    for name in policies:
-        _resolved(name)
+    for name in policies:  # every agent loads before --out is made: a refused one
+        _resolved(name, args.allow_pickle).load()  # leaves no empty folder behind
     if args.out is None:
         args.out = new_out_dir()
     else:
@@ -175,25 +178,20 @@ def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
     return env_kwargs, policies
 
 
-def _resolved(name: str):
+def _resolved(name: str, allow_pickle: bool):
     """``resolve_policy(name)``, after refusing a path that is neither a file nor a folder."""
-    import os
-    import stat
-
     path = name.removeprefix("handover:")
     try:
-        mode = os.stat(path).st_mode if path else None
-    except (OSError, ValueError):
-        mode = None
-    if mode is not None and not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
-        raise ValueError(f"policy {name!r}: {path} is not a regular file or an agent folder "
-                         "(a FIFO, device or socket is never read)")
-    return resolve_policy(name)
+        if path:
+            refuse_special_file(path)
+    except ValueError as exc:
+        raise ValueError(f"policy {name!r}: {exc}") from None
+    return resolve_policy(name, allow_pickle)
 
 
 def _bench(args: argparse.Namespace, command: str) -> int:
     """Run the bench command; print the tables. Returns the exit code."""
-    made = args.out is None  # a new folder under runs/eval
+    made = args.out is None or not Path(args.out).exists()  # removed again if left empty
     try:
         env_kwargs, policies = _checked(args)
         t0 = time.perf_counter()
@@ -209,7 +207,7 @@ def _bench(args: argparse.Namespace, command: str) -> int:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         if made and isinstance(args.out, Path) and args.out.is_dir() \
                 and not any(args.out.iterdir()):
-            args.out.rmdir()  # the new default folder, left empty
+            args.out.rmdir()  # made by this call, left empty
         return 2
     print()
     print(markdown_tables(results))
@@ -230,12 +228,7 @@ def main(argv=None) -> int:
     if args.command == "paper":
         from ..paper.cli import run as paper_run
 
-        try:
-            check_out_dir(args.out)
-        except ValueError as exc:
-            print(f"evaluate.py paper: error: {exc}", file=sys.stderr)
-            return 2
-        return paper_run(args)
+        return paper_run(args)  # it checks --out before any study
     if args.command == "curves":
         return _curves(args)
     return _bench(args, command)

@@ -48,7 +48,7 @@ from . import nominal
 from .scenarios import Scenario
 
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
-           "registered_policies", "resolve_policy", "make_policy", "default_policies",
+           "resolve_policy", "make_policy", "default_policies",
            "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
            "HANDOVER_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
            "TRAINED_ON_KEYS", "trained_on"]
@@ -256,12 +256,6 @@ def register_policy(name: str, factory: Callable, kind: PolicyKind | str = "base
                              "overwrite=True to shadow it")
     _REGISTRY[name] = entry
     return entry
-
-
-def registered_policies() -> dict[str, PolicyEntry]:
-    """``{name: entry}`` of the registered policies (a copy), plugins' included."""
-    load_plugins()
-    return dict(_REGISTRY)
 
 
 def load_plugins() -> None:

@@ -176,17 +176,27 @@ def _zoo_config(zoo: ZooRun) -> dict:
 
 
 def _run_config(run_dir: Path, model_path: Path) -> dict:
-    """``config.yml`` beside a pickled model; a missing or malformed one is an error."""
-    import yaml
+    """``config.yml`` beside a pickled model; a missing or malformed one is an error.
 
-    if not (run_dir / CONFIG_FILE).is_file():
+    Raises AgentLoadError naming the file when it is missing, not valid YAML (or beyond
+    the limits of :mod:`~tether_gym_agents.common.yamlio`), or not a mapping whose
+    ``hyperparams`` is a mapping.
+    """
+    from ..common.yamlio import YamlFileError
+
+    path = run_dir / CONFIG_FILE
+    if not path.is_file():
         raise AgentLoadError(f"agent {model_path} is incomplete: {CONFIG_FILE} (algorithm, "
                              "normalisation) is missing beside it")
-    checked_file(run_dir, run_dir / CONFIG_FILE)
+    checked_file(run_dir, path)
     try:
-        return read_config(run_dir)
-    except yaml.YAMLError as exc:
-        raise AgentLoadError(f"{run_dir / CONFIG_FILE} is not valid YAML: {exc}") from None
+        cfg = read_config(run_dir)
+    except YamlFileError as exc:
+        raise AgentLoadError(str(exc)) from None
+    if not isinstance(cfg, dict) or not isinstance(cfg.get("hyperparams") or {}, dict):
+        raise AgentLoadError(f"{path} must be a mapping with a mapping 'hyperparams' (as "
+                             f"train.py writes it), got {type(cfg).__name__}")
+    return cfg
 
 
 def _pickled_stats(run_dir: Path, stats: Path, model_path: Path) -> ObsNormalization | None:

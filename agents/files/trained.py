@@ -14,6 +14,8 @@ the same evaluation path as the baselines.
 from __future__ import annotations
 
 import json
+import os
+import stat
 from pathlib import Path
 
 import numpy as np
@@ -35,13 +37,33 @@ from .safe_format import (
 )
 
 __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agents",
-           "RUN_AGENT_DIRS", "find_unit", "hybrid_of"]
+           "RUN_AGENT_DIRS", "find_unit", "hybrid_of", "refuse_special_file"]
 
 PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
 """Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
 
 RUN_AGENT_DIRS = (FINAL_AGENT_DIR,)
 """Safe agent folders inside a ``train.py`` run folder, in the order they are tried."""
+
+
+def refuse_special_file(path) -> None:
+    """Refuse ``path`` when it exists but is neither a regular file nor a folder.
+
+    A FIFO, a device such as ``/dev/zero`` or a socket (or a link to one) is never opened:
+    reading it would hang or never end.
+
+    Raises
+    ------
+    AgentLoadError
+        ``"<path> is not a regular file or an agent folder (...)"``.
+    """
+    try:
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return  # missing (or an invalid name): the caller says what it expected there
+    if not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
+        raise AgentLoadError(f"{path} is not a regular file or an agent folder (a FIFO, "
+                             "device or socket is never read)")
 
 
 def find_unit(path) -> Path | None:
@@ -189,10 +211,12 @@ class TrainedAgent:
         Raises
         ------
         AgentLoadError
-            If nothing loadable is there, a piece of the agent is missing (named), a file
-            is corrupt, or only pickled files are there and ``allow_pickle`` is False.
+            If nothing loadable is there, ``path`` is not a regular file or a folder (a
+            FIFO, ``/dev/zero``), a piece of the agent is missing (named), a file is
+            corrupt, or only pickled files are there and ``allow_pickle`` is False.
         """
         path = Path(path)
+        refuse_special_file(path)
         if not path.exists():
             raise AgentLoadError(f"agent path {str(path)!r} does not exist")
         unit = find_unit(path)

@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
@@ -165,8 +166,16 @@ def run(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        The exit code (0).
+        The exit code: 0, or 2 after one ``error:`` line on stderr when ``--out`` is
+        empty, a file or not writable (checked before any study runs).
     """
+    from ..evaluation.benchmark import check_out_dir
+
+    try:
+        check_out_dir(args.out)
+    except ValueError as exc:
+        print(f"evaluate.py paper: error: {exc}", file=sys.stderr)
+        return 2
     reproduce(args.out, orbits=args.orbits, quick=args.quick)
     return 0
 
