@@ -33,19 +33,11 @@ Files are read only if they are regular files inside the agent folder (a symlink
 resolved target stays inside the folder is read; one that leads out, or a device or FIFO,
 is an error naming the file: :mod:`.folder_paths`).
 
-Before anything is allocated, the values of ``agent.json`` are checked
-(:mod:`.agent_values`); each value out of bounds is an :class:`AgentLoadError` naming the
-file, the key and what is allowed:
-
-* ``env.id``: an id tether_gym registers (``tether_gym/TetherLibration-v1``) or null;
-  ``env.kwargs`` a mapping.
-* ``obs_normalization``: ``mean`` finite; ``var`` finite and >= 0; ``clip_obs`` a finite
-  number > 0; ``epsilon`` a finite number in [0, 1]; ``count`` a finite number >= 0.
-* spaces: 1 to 4 axes, at most 100,000 entries.
-* ``policy_kwargs.net_arch``: a list (or a mapping of the algorithm's ``net_keys``:
-  ``pi``/``vf`` (PPO), ``pi``/``qf`` (SAC, TQC, TD3)) of at most 8 layers, each 1 to
-  4096 units wide, and at most 20,000,000 parameters in the networks the policy builds
-  (about 80 MB of float32).
+Before anything is allocated, the values of ``agent.json`` and the weights' dtypes and
+values are checked; each value out of bounds is an :class:`AgentLoadError` naming the
+file, the key, the value and what is allowed. The bounds are listed in one place, the
+docstring of :mod:`.agent_values` (normalisation statistics, spaces and their Box
+bounds, network sizes, ``log_std_init``, weights float32/float64 and finite).
 """
 
 from __future__ import annotations

@@ -40,7 +40,7 @@ __all__ = ["TrainedAgent", "AgentLoadError", "PRETRAINED_DIR", "pretrained_agent
            "RUN_AGENT_DIRS", "find_unit", "hybrid_of", "refuse_special_file"]
 
 PRETRAINED_DIR = Path(__file__).resolve().parents[1] / "pretrained"
-"""Shipped agents: one folder per algorithm (``ppo``, ``sac``)."""
+"""Shipped agents: one folder (or folder of seed runs) per name (``ppo``, ...)."""
 
 RUN_AGENT_DIRS = (FINAL_AGENT_DIR,)
 """Safe agent folders inside a ``train.py`` run folder, in the order they are tried."""
@@ -142,7 +142,8 @@ class TrainedAgent:
     norm : ObsNormalization or None
         The observation statistics it was trained with (None: not normalised).
     algo : str
-        ``"ppo"`` or ``"sac"``, as recorded in the agent's files.
+        A name of :data:`~tether_gym_agents.common.algorithms.ALGORITHMS` (``"ppo"``,
+        ``"td3"``, ...), as recorded in the agent's files.
     env_id, env_kwargs : str or None, dict
         The environment the agent was trained on (as recorded).
     path : Path or None
@@ -284,7 +285,7 @@ class TrainedAgent:
 
 
 def pretrained_agents() -> dict[str, Path]:
-    """The shipped agents that are present: ``{"ppo": path, "sac": path}``.
+    """The shipped agents that are present: ``{name: path}`` (``"ppo"``, ``"sac"``, ...).
 
     An agent folder, or a folder of ``seed_K`` agent folders (one policy trained over
     several seeds).

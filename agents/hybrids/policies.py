@@ -179,7 +179,7 @@ class ResidualPolicy(_Filtering):
     base : object with ``predict``
         The base law (rate mode), e.g. the sliding-mode controller.
     residual_model : object with ``predict``
-        A trained model (e.g. a stable-baselines3 PPO or SAC) whose deterministic
+        A trained model (any stable-baselines3 policy) whose deterministic
         action in [-1, 1]^n is the residual.
     scale : float
         Weight of the residual [-], >= 0 (0 gives the base law).
