@@ -20,6 +20,7 @@ from typing import Any
 
 import tether_gym
 
+from ..common.algorithms import algorithm
 from ..common.features import FeatureSpec
 from ..files.run_folder import CONFIG_FILE, read_config
 from ..files.safe_format import ALGOS
@@ -381,20 +382,23 @@ def _read_params(options: TrainOptions, out: Path) -> tuple[dict, str]:
         path = options.config_path
         return load_hyperparams(path, options.algo, options.env_id), str(path)
     resolved = out / CONFIG_FILE
-    if not resolved.is_file():
-        raise ConfigError(f"--resume: {resolved} not found (is {out} a run folder?)")
-    import yaml  # until files.run_folder.read_config raises YamlFileError (ValueError) only
-
     try:
         saved = read_config(out)
-    except (OSError, ValueError, yaml.YAMLError, RecursionError) as exc:
+    except FileNotFoundError:
+        raise ConfigError(f"--resume: {resolved} not found (is {out} a run folder?)") from None
+    except (OSError, ValueError, RecursionError) as exc:  # a FIFO, a link out, bad YAML
         message = " ".join(str(exc).split())
         raise ConfigError(f"--resume: {resolved} cannot be read: {message}") from None
     if not isinstance(saved, dict):
         raise ConfigError(f"--resume: {resolved} is not a mapping of run settings")
-    if saved.get("algo") not in (None, options.algo):
-        raise ConfigError(f"--resume: {out} is a {saved['algo'].upper()} run; pass "
-                          f"--algo {saved['algo']}")
+    if "algo" in saved:
+        try:
+            name = algorithm(saved["algo"]).name
+        except (TypeError, ValueError):
+            raise ConfigError(f"--resume: {resolved}: algo: {saved['algo']!r} must be one of "
+                              f"{list(ALGOS)}") from None
+        if name != options.algo:
+            raise ConfigError(f"--resume: {out} is a {name.upper()} run; pass --algo {name}")
     if not isinstance(saved.get("hyperparams"), dict):
         raise ConfigError(f"--resume: {resolved} records no hyperparams")
     return dict(saved["hyperparams"]), str(resolved)

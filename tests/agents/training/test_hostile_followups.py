@@ -117,3 +117,31 @@ def test_resume_with_non_finite_count_in_config_yml_is_one_line(tiny_run, tmp_pa
     assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
     assert _one_line(capsys) == (f"train.py: error: {out / 'config.yml'}: n_timesteps: nan "
                                  "must be a whole number >= 1")
+
+
+def test_resume_of_a_run_whose_algo_is_not_a_name_is_one_line(tiny_run, tmp_path, capsys,
+                                                              no_training):
+    """Before: ``AttributeError: 'list' object has no attribute 'upper'``."""
+    out = _copy(tiny_run, tmp_path)
+    _edit_config(out, "algo: ppo\n", "algo: [td3]\n")
+    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    assert _one_line(capsys) == (f"train.py: error: --resume: {out / 'config.yml'}: algo: "
+                                 "['td3'] must be one of ['ppo', 'sac', 'td3', 'tqc']")
+
+
+@pytest.mark.parametrize("kind", ["fifo", "folder", "dev-zero link"])
+def test_resume_names_a_config_yml_that_is_not_a_regular_file(tiny_run, tmp_path, capsys,
+                                                              no_training, kind):
+    """Before: every one was "config.yml not found (is RUN a run folder?)"."""
+    import os
+
+    out = _copy(tiny_run, tmp_path)
+    path = out / "config.yml"
+    path.unlink()
+    {"fifo": os.mkfifo, "folder": os.mkdir,
+     "dev-zero link": lambda p: os.symlink("/dev/zero", p)}[kind](path)
+    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    err = _one_line(capsys)
+    assert err.startswith(f"train.py: error: --resume: {path} cannot be read: "), err
+    assert "not found" not in err
+    assert ("leads outside" if kind == "dev-zero link" else "not a regular file") in err, err
