@@ -185,7 +185,8 @@ def _resolved(name: str, allow_pickle: bool):
         if path:
             refuse_special_file(path)
     except ValueError as exc:
-        raise ValueError(f"policy {name!r}: {exc}") from None
+        shown = repr(name) if len(name) <= 200 else f"{name[:60]!r}..."
+        raise ValueError(f"policy {shown}: {exc}") from None
     return resolve_policy(name, allow_pickle)
 
 

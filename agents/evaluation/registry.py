@@ -524,8 +524,11 @@ def _registered_spec(name: str) -> PolicySpec:
 def _agent_path(name: str) -> Path | None:
     """The shipped agent called ``name``, or ``name`` as an existing path, else None."""
     path = shipped_agents().get(name)
-    if path is None and name and Path(name).exists():
-        path = Path(name)
+    if path is None and name:
+        try:
+            path = Path(name) if Path(name).exists() else None
+        except OSError:  # e.g. longer than a file name may be: no such agent
+            path = None
     return path
 
 
@@ -556,9 +559,10 @@ def unknown_policy_message(name: str) -> str:
     """The error for a name that is none of the valid ones; lists them."""
     registered = list(_REGISTRY)
     shipped = list(shipped_agents())
-    close = difflib.get_close_matches(name, registered + shipped, n=1)
+    close = difflib.get_close_matches(name[:200], registered + shipped, n=1)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return (f"unknown policy {name!r}{hint}; valid: a registered policy "
+    shown = repr(name) if len(name) <= 200 else f"{name[:60]!r}... ({len(name)} characters)"
+    return (f"unknown policy {shown}{hint}; valid: a registered policy "
             f"{', '.join(registered)}; a shipped agent {', '.join(shipped) or '(none)'}; "
             f"{HANDOVER}<agent> (a shipped agent or a path); or a path to a trained agent "
             "(run folder, model file or folder of seed_K run folders)")

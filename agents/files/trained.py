@@ -13,6 +13,7 @@ the same evaluation path as the baselines.
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import stat
@@ -55,12 +56,19 @@ def refuse_special_file(path) -> None:
     Raises
     ------
     AgentLoadError
-        ``"<path> is not a regular file or an agent folder (...)"``.
+        ``"<path> is not a regular file or an agent folder (...)"``, or the path is
+        longer than the system allows.
     """
     try:
         mode = os.stat(path).st_mode
-    except (OSError, ValueError):
-        return  # missing (or an invalid name): the caller says what it expected there
+    except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            text = str(path)
+            raise AgentLoadError(f"agent path {text[:60]!r}... ({len(text)} characters): "
+                                 f"{exc.strerror}") from None
+        return  # missing: the caller says what it expected there
+    except ValueError:
+        return  # an invalid name (a NUL byte): no such file either
     if not (stat.S_ISDIR(mode) or stat.S_ISREG(mode)):
         raise AgentLoadError(f"{path} is not a regular file or an agent folder (a FIFO, "
                              "device or socket is never read)")

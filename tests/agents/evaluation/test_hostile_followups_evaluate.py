@@ -82,3 +82,16 @@ def test_registered_policies_is_gone():
     """It had no caller (issue 33); the registry is read through resolve_policy."""
     assert not hasattr(registry, "registered_policies")
     assert "registered_policies" not in registry.__all__
+
+
+@pytest.mark.parametrize("prefix", ["", "handover:"])
+def test_a_name_too_long_for_a_path_is_one_short_line(prefix, capsys):
+    """Before (sweep row eval.policy.long): ``OSError: [Errno 36] File name too long``
+    traceback from ``Path(name).exists()`` in the registry."""
+    name = prefix + "p" * 5000
+    assert main([name, "--seeds", "1"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("evaluate.py: error: policy") and "5000 characters" in err
+    assert len(err.splitlines()) == 1 and len(err) < 400
+    with pytest.raises(ValueError, match="unknown policy .*5000 characters"):
+        registry.resolve_policy("q" * 5000)  # the library call: no OSError either

@@ -53,3 +53,9 @@ def test_pickled_run_with_a_bad_config_is_an_agent_load_error(tmp_path, name):
     (run / "config.yml").write_text(text)
     with pytest.raises(AgentLoadError, match=f"config.yml.*{message}|{message}.*config.yml"):
         TrainedAgent.load(run, allow_pickle=True)
+
+
+def test_load_a_path_longer_than_the_system_allows():
+    """Before: ``OSError: [Errno 36] File name too long`` from ``Path.exists``."""
+    with pytest.raises(AgentLoadError, match=r"\(5000 characters\): File name too long"):
+        TrainedAgent.load("p" * 5000)
