@@ -36,7 +36,7 @@ from ..evaluation.benchmark import (
     evaluate,
     new_out_dir,
 )
-from ..evaluation.registry import BASELINES, default_policies, resolve_policy
+from ..evaluation.registry import BASELINES, default_policies, resolve_policy, reusing
 from ..evaluation.results import markdown_tables
 from ..evaluation.scenarios import describe_suites, get_suite
 from ..files.trained import refuse_special_file
@@ -155,8 +155,9 @@ def _with_command(argv: list[str]) -> list[str]:
     return argv
 
 
-def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
-    """The env arguments and the policies of a bench command, every argument checked.
+def _checked(args: argparse.Namespace) -> tuple[dict, list[str], dict]:
+    """The env arguments, the policy names and their specs (``{name: spec}``, agents
+    loaded) of a bench command, every argument checked.
 
     Raises ValueError naming the flag or the value, before anything is built or run.
     """
@@ -165,9 +166,11 @@ def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
     check_int("--seed", args.seed, 0, MAX_SEED - args.seeds + 1)
     check_int("--torch-threads", args.torch_threads, 1, MAX_TORCH_THREADS)
     get_suite(args.suite)
-    policies = args.policies or default_policies()
-    for name in policies:  # every agent loads before --out is made: a refused one
-        _resolved(name, args.allow_pickle).load()  # leaves no empty folder behind
+    names, specs = list(args.policies or default_policies()), {}
+    for name in names:  # every agent loads before --out is made: a refused one leaves
+        if name not in specs:  # no empty folder behind
+            specs[name] = _resolved(name, args.allow_pickle)
+            specs[name].load()
     if args.out is None:
         args.out = new_out_dir()
     else:
@@ -175,7 +178,7 @@ def _checked(args: argparse.Namespace) -> tuple[dict, list[str]]:
         args.out = Path(args.out)
         if (args.out / "results.json").exists():
             print(f"--out {args.out}: replacing the results of an earlier evaluation there")
-    return env_kwargs, policies
+    return env_kwargs, names, specs
 
 
 def _resolved(name: str, allow_pickle: bool):
@@ -194,7 +197,7 @@ def _bench(args: argparse.Namespace, command: str) -> int:
     """Run the bench command; print the tables. Returns the exit code."""
     made = args.out is None or not Path(args.out).exists()  # removed again if left empty
     try:
-        env_kwargs, policies = _checked(args)
+        env_kwargs, policies, specs = _checked(args)
         t0 = time.perf_counter()
         print(f"tether_gym {tether_gym.__version__}: {len(policies)} policies on suite "
               f"{args.suite!r}, {args.seeds} seeds per scenario and run, torch threads "
@@ -203,7 +206,9 @@ def _bench(args: argparse.Namespace, command: str) -> int:
         options = EvalOptions(out=args.out, plots=not args.no_plots,
                               torch_threads=args.torch_threads, command=command,
                               allow_pickle=args.allow_pickle)
-        results = evaluate(policies, args.suite, args.seeds, args.seed, env_kwargs, options)
+        with reusing(specs, args.allow_pickle):  # the agents loaded above, not again
+            results = evaluate(policies, args.suite, args.seeds, args.seed,
+                               env_kwargs, options)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         if made and isinstance(args.out, Path) and args.out.is_dir() \

@@ -95,3 +95,24 @@ def test_a_name_too_long_for_a_path_is_one_short_line(prefix, capsys):
     assert len(err.splitlines()) == 1 and len(err) < 400
     with pytest.raises(ValueError, match="unknown policy .*5000 characters"):
         registry.resolve_policy("q" * 5000)  # the library call: no OSError either
+
+
+def test_each_agent_is_loaded_once(tmp_path, monkeypatch):
+    """Loading every agent before --out is made does not load it a second time for the
+    evaluation (``registry.reusing``): one ``TrainedAgent.load`` per run folder."""
+    from tether_gym_agents.files.trained import TrainedAgent
+
+    calls = []
+    real = TrainedAgent.load.__func__
+
+    def counted(cls, path, *args, **kwargs):
+        calls.append(path)
+        return real(cls, path, *args, **kwargs)
+
+    monkeypatch.setattr(TrainedAgent, "load", classmethod(counted))
+    runs = registry.resolve_policy("ppo_fast").n_runs
+    assert main(["smc", "ppo_fast", "--suite", "paper", "--seeds", "1", "--no-plots",
+                 "--env-kwargs", "orbits_per_episode=0.2", "--out",
+                 str(tmp_path / "out")]) == 0
+    assert len(calls) == runs
+    assert not registry._REUSED  # the block restored the registry
