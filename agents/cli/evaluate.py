@@ -193,6 +193,12 @@ def _resolved(name: str, allow_pickle: bool):
     return resolve_policy(name, allow_pickle)
 
 
+def _remove_if_made_empty(out, made: bool) -> None:
+    """Remove the output folder ``out`` after an error when this call made it, still empty."""
+    if made and isinstance(out, Path) and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
+
+
 def _bench(args: argparse.Namespace, command: str) -> int:
     """Run the bench command; print the tables. Returns the exit code."""
     made = args.out is None or not Path(args.out).exists()  # removed again if left empty
@@ -211,9 +217,7 @@ def _bench(args: argparse.Namespace, command: str) -> int:
                                env_kwargs, options)
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
-        if made and isinstance(args.out, Path) and args.out.is_dir() \
-                and not any(args.out.iterdir()):
-            args.out.rmdir()  # made by this call, left empty
+        _remove_if_made_empty(args.out, made)
         return 2
     print()
     print(markdown_tables(results))
@@ -252,6 +256,7 @@ def _curves(args: argparse.Namespace) -> int:
     )
     from ..files.run_folder import seed_runs
 
+    made = not Path(args.out).exists()  # removed again if an error leaves it empty
     try:
         check_int("--seeds", args.seeds, 1, MAX_SEEDS)
         get_suite(args.suite)
@@ -276,6 +281,7 @@ def _curves(args: argparse.Namespace) -> int:
             print(markdown(all_curves[-1]))
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
+        _remove_if_made_empty(args.out, made)
         return 2
     for path in write_curves(all_curves, args.out):
         print(f"wrote {path}")

@@ -116,3 +116,16 @@ def test_each_agent_is_loaded_once(tmp_path, monkeypatch):
                  str(tmp_path / "out")]) == 0
     assert len(calls) == runs
     assert not registry._REUSED  # the block restored the registry
+
+
+def test_curves_error_leaves_no_out_folder(tmp_path, capsys):
+    """Before: ``evaluate.py curves`` made --out first; a folder without checkpoint agents
+    ended in exit 2 with the new --out left behind, empty. An --out that was there stays."""
+    runs = _refused_agent(tmp_path)
+    out = tmp_path / "curves_out"
+    assert main(["curves", str(runs), "--seeds", "1", "--out", str(out)]) == 2
+    assert "no checkpoint agents" in capsys.readouterr().err
+    assert not out.exists()
+    out.mkdir()
+    assert main(["curves", str(runs), "--seeds", "1", "--out", str(out)]) == 2
+    assert out.is_dir()
