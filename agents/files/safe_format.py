@@ -346,6 +346,9 @@ def _read_meta(path: Path) -> dict:
         meta = json.loads(meta_path.read_text())
     except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
         raise AgentLoadError(f"{meta_path} is not valid JSON: {exc}") from None
+    except RecursionError:  # e.g. 100k nested [: Python's decoder recurses per level
+        raise AgentLoadError(f"{meta_path} is not valid agent JSON: nested too deeply"
+                             ) from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
         raise AgentLoadError(f"{meta_path} is not a {FORMAT} file (format "
                              f"{meta.get('format') if isinstance(meta, dict) else None!r})")
@@ -382,7 +385,12 @@ def _checked_weights(path: Path, meta: dict) -> Path:
     if info["module"] != ALGORITHMS[algo].weights:
         raise AgentLoadError(f"{meta_path}: weights module {info['module']!r} does not "
                              f"fit {algo.upper()} (expected {ALGORITHMS[algo].weights!r})")
-    weights = path / Path(str(info["file"])).name
+    if not isinstance(info["file"], str) or Path(info["file"]).name != info["file"] \
+            or info["file"] in ("", ".", ".."):
+        raise AgentLoadError(f"{meta_path}: weights.file={info['file']!r}; allowed: the name "
+                             f"of a file in the agent folder (e.g. {WEIGHTS_FILE!r}), no "
+                             "folder part")
+    weights = path / info["file"]
     if weights.exists():
         checked_file(path, weights)
     if not weights.is_file():

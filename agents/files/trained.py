@@ -132,7 +132,7 @@ def hybrid_of(path) -> dict | None:
         if (run / CONFIG_FILE).is_file():
             data = read_config(run)  # its errors are ValueErrors: None below
             return run_hybrid(data) if isinstance(data, dict) else None
-    except (OSError, UnicodeDecodeError, ValueError, AttributeError):
+    except (OSError, UnicodeDecodeError, ValueError, AttributeError, RecursionError):
         return None
     return None
 

@@ -4,7 +4,9 @@ valid YAML or not a mapping is an ``AgentLoadError`` naming the file."""
 
 from __future__ import annotations
 
+import json
 import os
+from pathlib import Path
 
 import pytest
 
@@ -59,3 +61,37 @@ def test_load_a_path_longer_than_the_system_allows():
     """Before: ``OSError: [Errno 36] File name too long`` from ``Path.exists``."""
     with pytest.raises(AgentLoadError, match=r"\(5000 characters\): File name too long"):
         TrainedAgent.load("p" * 5000)
+
+
+def _shipped_copy(tmp_path):
+    import shutil
+
+    from tether_gym_agents.files.trained import PRETRAINED_DIR
+
+    return Path(shutil.copytree(PRETRAINED_DIR / "ppo_fast" / "seed_0", tmp_path / "unit"))
+
+
+def test_agent_json_nested_too_deeply_is_named(tmp_path):
+    """Before (sweep row agent.json.deep): ``RecursionError`` from ``json.loads``, in
+    ``hybrid_of`` (evaluate.py) and in ``TrainedAgent.load``."""
+    from tether_gym_agents.cli.evaluate import main
+
+    unit = _shipped_copy(tmp_path)
+    (unit / "agent.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(AgentLoadError, match="agent.json is not valid agent JSON: nested"):
+        TrainedAgent.load(unit)
+    assert main([str(unit), "--seeds", "1", "--out", str(tmp_path / "out")]) == 2
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("value", ["../outside/policy.safetensors", "sub/policy.safetensors",
+                                   "..", 7])
+def test_weights_file_with_a_folder_part_is_refused(tmp_path, value):
+    """Before (sweep rows agent.weights.file_up*): a value with a folder part was
+    silently read as its last component, inside the folder."""
+    unit = _shipped_copy(tmp_path)
+    meta = json.loads((unit / "agent.json").read_text())
+    meta["weights"]["file"] = value
+    (unit / "agent.json").write_text(json.dumps(meta))
+    with pytest.raises(AgentLoadError, match=r"weights.file=.*no folder part"):
+        TrainedAgent.load(unit)
