@@ -64,8 +64,9 @@ def _no_study(*args, **kwargs):
 
 @pytest.mark.parametrize("how", ["a file", "empty"])
 def test_paper_out_checked_before_any_study(tmp_path, monkeypatch, capsys, how):
-    """Before: ``--out FILE`` ended in a FileExistsError traceback after every study
-    had run; ``--out ""`` wrote the figures into the current folder."""
+    """Before: ``python -m tether_gym_agents.paper.cli --out FILE`` ended in a
+    FileExistsError traceback; ``--out ""`` ran the studies to write into the current
+    folder."""
     monkeypatch.setattr(paper_cli, "reproduce", _no_study)
     monkeypatch.chdir(tmp_path)
     out = tmp_path / "results.txt"
