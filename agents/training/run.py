@@ -112,12 +112,15 @@ def train(settings: TrainSettings) -> RunSummary:
         save_stats,
     )
     from .curves import plot_learning_curve
+    from .resume import check_run_files
 
     # SB3 may add entries to the hyperparameters' mappings (SAC: policy_kwargs.use_sde):
     # this run's own copy takes them, and config.yml records them, as it always did
     settings = replace(settings, hyperparams=copy.deepcopy(settings.hyperparams))
     torch.set_num_threads(settings.options.torch_threads)
     out = settings.out
+    if settings.resume:  # every refusal before the first write (train_info.json below)
+        check_run_files(out)
     out.mkdir(parents=True, exist_ok=True)
     print(f"env {settings.env_id} with env kwargs {json.dumps(settings.env_kwargs)}")
     for note in settings.notes:

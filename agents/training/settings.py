@@ -22,7 +22,19 @@ import tether_gym
 
 from ..common.algorithms import algorithm
 from ..common.features import FeatureSpec
-from ..files.run_folder import CONFIG_FILE, read_config
+from ..files.run_folder import (
+    ARGS_FILE,
+    BEST_MODEL_FILE,
+    COMMAND_FILE,
+    CONFIG_FILE,
+    EVALUATIONS_FILE,
+    FINAL_MODEL_FILE,
+    LEARNING_CURVE_FILE,
+    REPLAY_BUFFER_FILE,
+    TRAIN_INFO_FILE,
+    VECNORMALIZE_FILE,
+    read_config,
+)
 from ..files.safe_format import ALGOS
 from ..hybrids.residual_spec import ResidualSpec
 from .config import (
@@ -418,10 +430,20 @@ def _check_sizes(params: dict, options: TrainOptions, n_envs: int, source: str) 
         raise ConfigError(str(exc)) from None
 
 
+_WRITTEN_FILES = (CONFIG_FILE, ARGS_FILE, COMMAND_FILE, TRAIN_INFO_FILE, EVALUATIONS_FILE,
+                  LEARNING_CURVE_FILE, BEST_MODEL_FILE, FINAL_MODEL_FILE, VECNORMALIZE_FILE,
+                  REPLAY_BUFFER_FILE)
+"""Files a run writes at the top of its folder (a folder in their place is refused)."""
+
+
 def _check_out(out: Path) -> None:
     """The run folder exists or can be made, and a file can be written in it."""
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {str(out)!r}: is a file; give a folder (new or a run folder)")
+    for name in _WRITTEN_FILES:
+        if (out / name).is_dir():
+            raise ConfigError(f"--out {str(out)!r}: {out / name} is a folder; the run writes "
+                              "a file there (remove or rename it)")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / ".write_test"

@@ -114,7 +114,7 @@ def test_resume_with_non_finite_count_in_config_yml_is_one_line(tiny_run, tmp_pa
     """Before: ``ValueError: cannot convert float NaN to integer``."""
     out = _copy(tiny_run, tmp_path)
     _edit_config(out, "  n_timesteps: 3000000\n", "  n_timesteps: .nan\n")
-    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
     assert _one_line(capsys) == (f"train.py: error: {out / 'config.yml'}: n_timesteps: nan "
                                  "must be a whole number >= 1")
 
@@ -124,7 +124,7 @@ def test_resume_of_a_run_whose_algo_is_not_a_name_is_one_line(tiny_run, tmp_path
     """Before: ``AttributeError: 'list' object has no attribute 'upper'``."""
     out = _copy(tiny_run, tmp_path)
     _edit_config(out, "algo: ppo\n", "algo: [td3]\n")
-    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
     assert _one_line(capsys) == (f"train.py: error: --resume: {out / 'config.yml'}: algo: "
                                  "['td3'] must be one of ['ppo', 'sac', 'td3', 'tqc']")
 
@@ -140,8 +140,48 @@ def test_resume_names_a_config_yml_that_is_not_a_regular_file(tiny_run, tmp_path
     path.unlink()
     {"fifo": os.mkfifo, "folder": os.mkdir,
      "dev-zero link": lambda p: os.symlink("/dev/zero", p)}[kind](path)
-    assert main(["--resume", "--out", str(out), "--no-progress"]) == 2
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
     err = _one_line(capsys)
     assert err.startswith(f"train.py: error: --resume: {path} cannot be read: "), err
     assert "not found" not in err
     assert ("leads outside" if kind == "dev-zero link" else "not a regular file") in err, err
+
+
+def test_resume_refuses_before_writing_anything(tiny_run, tmp_path, capsys):
+    """A FIFO checkpoint is refused; before, train_info.json had been rewritten first."""
+    import os
+
+    out = _copy(tiny_run, tmp_path)
+    os.mkfifo(out / "checkpoints" / "model_9999_steps.zip")
+    info = (out / "train_info.json").read_bytes()
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("train.py: error: --resume: ") and "model_9999_steps.zip" in err, err
+    assert (out / "train_info.json").read_bytes() == info
+
+
+def test_resume_refuses_a_train_info_json_linked_out(tiny_run, tmp_path, capsys):
+    """Before: the link was replaced by a regular file and the run trained on."""
+    out = _copy(tiny_run, tmp_path)
+    outside = tmp_path / "elsewhere.json"
+    outside.write_text("{}")
+    (out / "train_info.json").unlink()
+    (out / "train_info.json").symlink_to(outside)
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith(f"train.py: error: --resume: {out / 'train_info.json'} leads "
+                          "outside"), err
+    assert (out / "train_info.json").is_symlink() and outside.read_text() == "{}"
+
+
+@pytest.mark.parametrize("resume", [False, True])
+def test_train_info_json_that_is_a_folder_is_one_line(tiny_run, tmp_path, capsys, resume):
+    """Before: ``IsADirectoryError`` traceback (os.replace onto the folder)."""
+    out = _copy(tiny_run, tmp_path)
+    (out / "train_info.json").unlink()
+    (out / "train_info.json").mkdir()
+    args = ["--resume", "--timesteps", "64"] if resume else ["--timesteps", "64"]
+    assert main([*args, "--out", str(out), "--no-progress"]) == 2
+    assert _one_line(capsys) == (f"train.py: error: --out {str(out)!r}: "
+                                 f"{out / 'train_info.json'} is a folder; the run writes a "
+                                 "file there (remove or rename it)")
