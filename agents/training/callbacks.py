@@ -211,6 +211,9 @@ class RunCheckpointCallback(CheckpointCallback):
             save_safe_agent(self.settings, self.model,
                             stats if stats is not None else self.training_env, folder,
                             wall_time_s=self.clock.elapsed())
+            # train_info.json at least as far as the newest checkpoint (ProgressCallback
+            # writes only every PROGRESS_EVERY_S s: it said 0 steps beside checkpoints)
+            self.clock.write("running", self.num_timesteps)
         return True
 
 

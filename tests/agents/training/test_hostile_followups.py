@@ -185,3 +185,32 @@ def test_train_info_json_that_is_a_folder_is_one_line(tiny_run, tmp_path, capsys
     assert _one_line(capsys) == (f"train.py: error: --out {str(out)!r}: "
                                  f"{out / 'train_info.json'} is a folder; the run writes a "
                                  "file there (remove or rename it)")
+
+
+class _Stop(Exception):
+    """Stops a run right after its first checkpoint (as a kill would, at that moment)."""
+
+
+def test_train_info_json_counts_the_steps_of_the_newest_checkpoint(tmp_path, monkeypatch):
+    """Before: ``"num_timesteps": 0`` while checkpoints existed (rewritten every 30 s only)."""
+    import json
+
+    from tether_gym_agents.training.callbacks import RunCheckpointCallback
+
+    step = RunCheckpointCallback._on_step
+
+    def checkpoint_then_stop(self):
+        result = step(self)
+        if self.n_calls % self.save_freq == 0:
+            raise _Stop
+        return result
+
+    monkeypatch.setattr(RunCheckpointCallback, "_on_step", checkpoint_then_stop)
+    out = tmp_path / "run"
+    with pytest.raises(_Stop):
+        main(["--timesteps", "64", "--n-envs", "1", "--checkpoint-freq", "16",
+              "--eval-freq", "1000", "--eval-episodes", "1", "--out", str(out),
+              "--no-progress"])
+    assert (out / "checkpoints" / "model_16_steps.zip").is_file()
+    info = json.loads((out / "train_info.json").read_text())
+    assert info["num_timesteps"] == 16 and info["status"] == "running"
