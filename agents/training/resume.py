@@ -16,9 +16,10 @@ named like a checkpoint or a link to ``/dev/zero`` is a :class:`ConfigError` nam
 (the command exits 2; nothing is opened, nothing is skipped silently). ``command.txt``,
 which the resumed run rewrites, must be a file of its own (no symlink, no hard link).
 
-**Replay buffers (SAC, TQC).** A checkpoint ``checkpoints/model_<N>_steps`` is written
-from stable-baselines3's callback, which runs after the env step that reaches step N and
-before that step's transitions are added to the buffer. Its buffer therefore holds
+**Replay buffers (off-policy algorithms: SAC, TQC, TD3).** A checkpoint
+``checkpoints/model_<N>_steps`` is written from stable-baselines3's callback, which runs
+after the env step that reaches step N and before that step's transitions are added to
+the buffer. Its buffer therefore holds
 ``N - n_envs`` transitions (the last step's are missing), while ``final_model.zip``'s
 buffer (``final_replay_buffer``) holds all N. A run resumed from a checkpoint (a killed
 run) continues at step N with ``N - n_envs`` transitions: each such resume leaves out one
@@ -36,6 +37,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from ..common.algorithms import algorithm
 from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import (
     ARGS_FILE,
@@ -140,6 +142,9 @@ class ResumeBuild(NamedTuple):
         The algorithm (``algo_cls.load`` for a pickled resume, on opt-in).
     tb_log : str
         TensorBoard folder.
+    algo : str
+        The run's algorithm, a name of :data:`~..common.algorithms.ALGORITHMS` (its row
+        says whether a replay buffer is resumed).
     allow_pickle : bool
         Whether pickled statistics and buffers may be loaded (``--allow-pickle``).
     """
@@ -148,6 +153,7 @@ class ResumeBuild(NamedTuple):
     normalized: Any
     algo_cls: Any
     tb_log: str
+    algo: str
     allow_pickle: bool = False
 
 
@@ -210,12 +216,16 @@ def _load_safe(saved: SavedModel, build: ResumeBuild, venv, eval_env):
         load_stats_npz((venv, eval_env), stats)
     model = build.new_model(venv)
     load_zip_weights(model, saved.model)
-    return model, venv, eval_env, saved.model, _load_buffer(model, saved, build.allow_pickle)
+    return model, venv, eval_env, saved.model, _load_buffer(model, saved, build.algo,
+                                                            build.allow_pickle)
 
 
-def _load_buffer(model, saved: SavedModel, allow_pickle: bool) -> bool:
-    """Fill an off-policy model's replay buffer from beside its saved model (True if so)."""
-    if not hasattr(model, "replay_buffer"):
+def _load_buffer(model, saved: SavedModel, algo: str, allow_pickle: bool) -> bool:
+    """Fill an off-policy model's replay buffer from beside its saved model (True if so).
+
+    ``algo``'s row of the algorithm table says whether the model has one.
+    """
+    if algorithm(algo).on_policy:
         return False
     arrays = safe_companion(saved.buffer)
     if arrays.is_file():
@@ -228,7 +238,7 @@ def _load_buffer(model, saved: SavedModel, allow_pickle: bool) -> bool:
     pickled = (f"; its pickled {saved.buffer.name} is read only with --allow-pickle"
                if saved.buffer.is_file() else "")
     print(f"warning: {saved.model.name} has no replay buffer beside it ({arrays.name}"
-          f"){pickled}; SAC continues with an empty buffer")
+          f"){pickled}; {algo.upper()} continues with an empty buffer")
     return False
 
 
@@ -242,7 +252,7 @@ def _load_pickled(saved: SavedModel, build: ResumeBuild, venv, eval_env):
     test_env.norm_reward = False
     model = build.algo_cls.load(saved.model, env=train_env, device="cpu",
                                 tensorboard_log=build.tb_log)
-    return model, train_env, test_env, saved.model, _load_buffer(model, saved, True)
+    return model, train_env, test_env, saved.model, _load_buffer(model, saved, build.algo, True)
 
 
 def continue_eval_history(callback, run_dir: Path, last_step: int) -> int:

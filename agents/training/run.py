@@ -258,7 +258,7 @@ def _resumed_model(settings: TrainSettings, venv, eval_env):
         normalized=(None if settings.normalize is False
                     else lambda v, e: _normalized(settings, v, e)),
         algo_cls=algo_class(settings.algo), tb_log=str(settings.out / TB_DIR),
-        allow_pickle=settings.options.allow_pickle)
+        allow_pickle=settings.options.allow_pickle, algo=settings.algo)
     model, venv, eval_env, model_path, buffer_loaded = load_resume_point(
         settings.out, build, venv, eval_env)
     start = int(model.num_timesteps)

@@ -214,3 +214,17 @@ def test_train_info_json_counts_the_steps_of_the_newest_checkpoint(tmp_path, mon
     assert (out / "checkpoints" / "model_16_steps.zip").is_file()
     info = json.loads((out / "train_info.json").read_text())
     assert info["num_timesteps"] == 16 and info["status"] == "running"
+
+
+def test_resume_without_buffer_names_the_runs_algorithm(tmp_path, capsys):
+    """Before: a TD3 run was told "SAC continues with an empty buffer"."""
+    out = tmp_path / "td3"
+    args = ["--algo", "td3", "--timesteps", "32", "--n-envs", "1", "--eval-episodes", "1",
+            "--out", str(out), "--no-progress"]
+    assert main(args) == 0
+    for name in ("final_replay_buffer.npz", "final_replay_buffer.pkl"):
+        (out / name).unlink(missing_ok=True)
+    capsys.readouterr()
+    assert main([*args, "--resume"]) == 0
+    printed = capsys.readouterr().out
+    assert "TD3 continues with an empty buffer" in printed and "SAC" not in printed, printed
