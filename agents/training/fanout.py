@@ -557,6 +557,22 @@ def _run_on_ray(jobs: list[SeedJob], address: str | None, threads: int):
             shutdown_ray(ray)
 
 
+def _check_seed_folder(out: Path, folder: Path) -> None:
+    """A ``seed_K`` that exists is a folder of its own inside ``out`` (no symlink).
+
+    A symlinked ``seed_K`` would train (and resume) a run elsewhere, another seed's or
+    one outside ``out``, under this seed's name.
+    """
+    if folder.is_symlink():
+        raise ConfigError(f"--out {out}: {folder} is a symlink (to {os.readlink(folder)}); "
+                          "each seed trains into a folder of its own inside --out")
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"--out {out}: {folder} is not a folder; each seed trains into a "
+                          "folder of its own inside --out")
+    if folder.exists() and not folder.resolve().is_relative_to(out.resolve()):
+        raise ConfigError(f"--out {out}: {folder} leads outside it (to {folder.resolve()})")
+
+
 def run_fanout(options: TrainOptions) -> int:
     """``train.py --seeds N``: train seeds ``--seed`` ... ``--seed + N - 1``; the exit code.
 
@@ -575,9 +591,12 @@ def run_fanout(options: TrainOptions) -> int:
     use_ray = seeds > 1 or bool(options.ray_address or os.environ.get("RAY_ADDRESS"))
     if use_ray:
         require_ray()
+    dirs = {seed: seed_dir(out, seed) for seed in range(options.seed, options.seed + seeds)}
+    for folder in dirs.values():
+        _check_seed_folder(out, folder)
     base = resolve_settings(replace(options, out=str(out)))
-    jobs = [SeedJob(f"seed {seed}", base.for_seed(seed, seed_dir(out, seed)))
-            for seed in range(options.seed, options.seed + seeds)]
+    jobs = [SeedJob(f"seed {seed}", base.for_seed(seed, folder))
+            for seed, folder in dirs.items()]
     t0 = time.perf_counter()
     try:
         results = run_jobs(jobs, address=options.ray_address, threads=options.torch_threads,

@@ -228,3 +228,23 @@ def test_resume_without_buffer_names_the_runs_algorithm(tmp_path, capsys):
     assert main([*args, "--resume"]) == 0
     printed = capsys.readouterr().out
     assert "TD3 continues with an empty buffer" in printed and "SAC" not in printed, printed
+
+
+@pytest.mark.parametrize("inside", [False, True])
+def test_fanout_refuses_a_seed_folder_that_is_a_symlink(tmp_path, capsys, monkeypatch,
+                                                        inside):
+    """Before: ``--seeds`` trained into (and resumed) whatever ``seed_K`` linked to."""
+    def refuse(settings):
+        raise AssertionError("a linked seed folder reached training")
+    monkeypatch.setattr("tether_gym_agents.training.fanout.train", refuse)
+    monkeypatch.delenv("RAY_ADDRESS", raising=False)
+    out = tmp_path / "seeds"
+    out.mkdir()
+    elsewhere = (out / "other") if inside else (tmp_path / "elsewhere")
+    elsewhere.mkdir()
+    (out / "seed_0").symlink_to(elsewhere)
+    assert main(["--seeds", "1", "--timesteps", "64", "--out", str(out), "--no-progress"]) == 2
+    assert _one_line(capsys) == (f"train.py: error: --out {out}: {out / 'seed_0'} is a symlink "
+                                 f"(to {elsewhere}); each seed trains into a folder of its own "
+                                 "inside --out")
+    assert not any(elsewhere.iterdir())
