@@ -1,4 +1,7 @@
-"""Train PPO or SAC on a tether_gym environment: the command line of ``train.py``.
+"""Train an agent on a tether_gym environment: the command line of ``train.py``.
+
+The learning algorithms (``--algo``) are the rows of
+:data:`~tether_gym_agents.common.algorithms.ALGORITHMS` (PPO, SAC, TQC, TD3 today).
 
 ``main`` parses the command line into a ``TrainOptions``, resolves it once into a
 ``TrainSettings`` (both in :mod:`tether_gym_agents.training.settings`) and trains
@@ -19,10 +22,10 @@ the run:
 * ``eval/evaluations.npz`` and ``learning_curve.png`` (the learning curve; every run
   ends with an evaluation, whatever its budget), ``tb/`` (TensorBoard);
 * ``train_info.json`` (steps, wall time including interrupted parts, seed; rewritten
-  every ``PROGRESS_EVERY_S`` seconds while training);
+  every ``PROGRESS_EVERY_S`` seconds while training and at each checkpoint);
 * for ``--resume``: the models (``final_model.zip``, ``best_model.zip``,
   ``checkpoints/``), read back as tensors only, and the normalisation statistics and
-  SAC's replay buffer as ``.npz`` arrays; stable-baselines3's pickled
+  an off-policy algorithm's replay buffer as ``.npz`` arrays; stable-baselines3's pickled
   ``vecnormalize.pkl`` and ``*replay_buffer.pkl`` are written beside them for other
   tools and are unpickled only with ``--allow-pickle``.
 
@@ -107,8 +110,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--verbose", type=int, default=0)
     fan = p.add_argument_group("many runs on Ray (pip install -e \".[ray]\")")
     fan.add_argument("--seeds", type=int, default=None, metavar="N",
-                     help="train seeds --seed ... --seed+N-1 into <out>/seed_K/, one Ray task "
-                          "each; re-running skips finished seeds and resumes interrupted ones")
+                     help="train N runs, training seeds --seed ... --seed+N-1, into "
+                          "<out>/seed_K/ (not evaluate.py's --seeds, which counts episodes "
+                          "per scenario), one Ray task each; re-running skips finished seeds "
+                          "and resumes interrupted ones")
     fan.add_argument("--ray-address", default=None, metavar="ADDRESS",
                      help="existing Ray cluster: auto, HOST:PORT or ray://HOST:PORT; local "
                           "for a new local instance (default: $RAY_ADDRESS, else a local "

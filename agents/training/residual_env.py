@@ -9,7 +9,8 @@ with u_base the paper's sliding-mode law
 designed on the env's *nominal* model, a_rl in [-1, 1]^n the learned residual and
 ``filter`` the optional model-based safety filter (:class:`tether_gym.safety.SafetyFilter`,
 predicting on the same nominal model). :class:`ResidualVecEnv` puts everything but a_rl
-inside a stable-baselines3 vector env, so PPO or SAC learn a_rl on it unchanged; at
+inside a stable-baselines3 vector env, so any algorithm of the table
+(:data:`~tether_gym_agents.common.algorithms.ALGORITHMS`) learns a_rl on it unchanged; at
 evaluation :class:`~tether_gym_agents.hybrids.policies.ResidualPolicy` computes the same sum
 around the trained agent.
 

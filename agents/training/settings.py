@@ -246,7 +246,7 @@ class TrainSettings:
 
     @property
     def algo(self) -> str:
-        """``"ppo"``, ``"sac"`` or ``"tqc"``."""
+        """The learning algorithm: a name of :data:`~..common.algorithms.ALGORITHMS`."""
         return self.options.algo
 
     @property

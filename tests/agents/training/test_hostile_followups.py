@@ -248,3 +248,26 @@ def test_fanout_refuses_a_seed_folder_that_is_a_symlink(tmp_path, capsys, monkey
                                  f"(to {elsewhere}); each seed trains into a folder of its own "
                                  "inside --out")
     assert not any(elsewhere.iterdir())
+
+
+def test_seeds_help_says_it_is_not_evaluate_pys_seeds(capsys):
+    """train.py's --seeds counts training runs; evaluate.py's counts episodes per scenario."""
+    with pytest.raises(SystemExit) as stop:
+        main(["--help"])
+    assert stop.value.code == 0
+    text = " ".join(capsys.readouterr().out.split())
+    assert "train N runs, training seeds --seed ... --seed+N-1, into <out>/seed_K/ (not " \
+           "evaluate.py's --seeds, which counts episodes per scenario)" in text, text
+
+
+def test_no_training_docstring_names_only_some_algorithms():
+    """The algorithms are the table's rows; "PPO or SAC" went stale when TQC and TD3 came."""
+    from pathlib import Path
+
+    import tether_gym_agents
+
+    root = Path(tether_gym_agents.__file__).parent
+    stale = [str(p.relative_to(root)) for p in [root / "cli" / "train.py",
+                                                *sorted((root / "training").glob("*.py"))]
+             if any(s in p.read_text() for s in ("PPO or SAC", '``"ppo"``, ``"sac"`` or'))]
+    assert not stale
