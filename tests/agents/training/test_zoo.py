@@ -14,14 +14,18 @@ import yaml
 import tether_gym
 from tether_gym_agents.training.config import CONFIG_DIR, RUN_KEYS, load_hyperparams
 
-ZOO_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs")
+ZOO_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "noise_type",
+            "noise_std")
 """The keys of RUN_KEYS that rl_zoo3 reads itself (its ExperimentManager takes them out of
-the block before it passes the rest to the algorithm)."""
+the block before it passes the rest to the algorithm; the action noise's too)."""
+NOISE_KEYS = ("noise_type", "noise_std")
+"""Zoo's keys a block may leave out (no action noise)."""
 OWN_KEYS = frozenset(RUN_KEYS) - frozenset(ZOO_KEYS)
 """train.py's own keys: zoo would pass them to the algorithm, which rejects them."""
 
 TINY = {"ppo": ["n_envs:2", "n_steps:64", "batch_size:64"],
-        "sac": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"]}
+        "sac": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"],
+        "td3": ["n_envs:2", "learning_starts:64", "batch_size:32", "buffer_size:1000"]}
 
 
 CONFIGS = sorted(CONFIG_DIR.glob("*.yml"))
@@ -40,13 +44,15 @@ def test_every_shipped_config_is_keyed_by_the_current_env_id(path):
     assert blocks <= {tether_gym.ENV_ID, "default"}, (path.name, sorted(blocks))
 
 
-@pytest.mark.parametrize("algo", ["ppo", "sac"])
+@pytest.mark.parametrize("algo", ["ppo", "sac", "td3"])
 def test_env_id_block_is_complete_for_zoo(algo):
     """rl_zoo3 reads only the env id's block (never `default`): it must hold everything."""
     doc = yaml.safe_load((CONFIG_DIR / f"{algo}.yml").read_text())
     block = doc[tether_gym.ENV_ID]
     for key in ZOO_KEYS:
-        assert key in block, key
+        assert key in block or key in NOISE_KEYS, key
+    assert all(key in block for key in NOISE_KEYS) or not any(key in block
+                                                               for key in NOISE_KEYS)
     # train.py's own keys stay out of zoo's way (in the default block)
     assert not OWN_KEYS & set(block), sorted(OWN_KEYS & set(block))
     merged = load_hyperparams(CONFIG_DIR / f"{algo}.yml", algo, tether_gym.ENV_ID)
@@ -54,7 +60,7 @@ def test_env_id_block_is_complete_for_zoo(algo):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("algo", ["ppo", "sac"])
+@pytest.mark.parametrize("algo", sorted(TINY))
 def test_rl_zoo3_trains_with_the_shipped_config(tmp_path, algo):
     # not imported here: importing rl_zoo3 patches gymnasium's TimeLimit for the whole process
     if importlib.util.find_spec("rl_zoo3") is None:
@@ -72,3 +78,5 @@ def test_rl_zoo3_trains_with_the_shipped_config(tmp_path, algo):
     assert "Using 'default' hyperparameters" not in proc.stdout
     assert "'eccentricity_range': [0.0, 0.35]" in proc.stdout
     assert "'mass_range': 0.25" in proc.stdout and "'norm_obs': True" in proc.stdout
+    if algo == "td3":  # zoo took the action noise out of the block and applied it
+        assert "Applying normal noise with std 0.1" in proc.stdout
