@@ -79,6 +79,10 @@ def _loader_class():
 
 def _describe(exc) -> str:
     """One line from a yaml.YAMLError: the problem and its line number (1-based)."""
+    if hasattr(exc, "character") and hasattr(exc, "position"):  # yaml.reader.ReaderError
+        char = exc.character if isinstance(exc.character, int) else ord(exc.character[:1] or " ")
+        return (f"character {exc.position + 1}: #x{char:04x} is not allowed in YAML "
+                "(a control character or NUL byte; is it a text file?)")
     mark = getattr(exc, "problem_mark", None) or getattr(exc, "context_mark", None)
     problem = getattr(exc, "problem", None)
     context = getattr(exc, "context", None)
@@ -125,7 +129,11 @@ def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES) -
         import yaml
     except ImportError:
         raise YamlFileError(f"{source}: reading YAML needs PyYAML: {YAML_PIP}") from None
-    loader = _loader_class()(text)
+    try:
+        # the reader refuses characters YAML does not allow (NUL bytes...) while built
+        loader = _loader_class()(text)
+    except yaml.YAMLError as exc:
+        raise YamlFileError(f"{source}: not valid YAML: {_describe(exc)}") from None
     try:
         return loader.get_single_data()
     except yaml.YAMLError as exc:

@@ -19,6 +19,8 @@ Bounds that size the run (each refused above, before anything is allocated):
 * ``learning_rate`` (or ``lin_<start>``) in (0, :data:`MAX_LEARNING_RATE`];
   ``n_epochs`` and ``gradient_steps`` <= :data:`MAX_UPDATES`; ``n_critics`` and
   ``n_quantiles`` in the row's ``bounds``.
+* ``normalize``'s values: ``norm_obs``/``norm_reward`` true or false, ``clip_obs``/
+  ``clip_reward`` finite and > 0, ``gamma`` in [0, 1], ``epsilon`` in (0, 1].
 """
 
 from __future__ import annotations
@@ -236,6 +238,13 @@ _POLICY_KWARGS: dict[str, Any] = {
     "share_features_extractor": _bool, "normalize_images": _bool, "ortho_init": _bool,
     "full_std": _bool, "squash_output": _bool, "clip_mean": _number(0.0, low_open=True),
 }
+_NORMALIZE: dict[str, Any] = {
+    "norm_obs": _bool, "norm_reward": _bool,
+    "clip_obs": _number(0.0, low_open=True), "clip_reward": _number(0.0, low_open=True),
+    "gamma": _unit, "epsilon": _number(0.0, 1.0, low_open=True),
+}
+"""The check of each key of a config's ``normalize`` mapping (VecNormalize's keyword
+arguments; an unknown key is reported by the config reader)."""
 """The check of each ``policy_kwargs`` key (its row's ``policy_kwargs`` say which it takes;
 ``net_arch``, ``activation_fn``, ``optimizer_kwargs`` and the counts: :func:`_policy_checks`)."""
 _OPTIMIZER = {"eps": _number(0.0, 1.0, low_open=True), "weight_decay": _number(0.0, 1.0),
@@ -437,6 +446,10 @@ def check_hyperparams(params: dict, algo: str, source: str, policy=None) -> None
         found = _non_finite(params.get(key), key)
         if found:
             raise ValueError(f"{source}: {found[0]}: {found[1]!r} must be finite")
+    if isinstance(params.get("normalize"), dict):
+        for key, value in params["normalize"].items():
+            if key in _NORMALIZE:
+                _run(_NORMALIZE[key], f"{source}: normalize.{key}", value)
     if "n_envs" in params:
         check_n_envs(params["n_envs"], f"{source}: n_envs")
     for key, check in _checks(row).items():

@@ -16,8 +16,8 @@ Sweep file (YAML, read with ``common.yamlio.load_yaml_file``: a regular file of 
 256 KiB, no anchors or aliases; unknown keys are rejected)::
 
     search: grid            # grid (every combination) | random | optuna
-    seeds_per_trial: 3      # seeds --seed ... --seed+n-1 per trial, >= 2 (default 3)
-    num_samples: 8          # random and optuna: number of trials (default 8)
+    seeds_per_trial: 3      # seeds --seed ... --seed+n-1 per trial, 2 .. 100 (default 3)
+    num_samples: 8          # random and optuna: number of trials, <= 10000 (default 8)
     sample_seed: 0          # random and optuna: seed of the draws (a rerun draws the same)
     timesteps: 200000       # env steps per run (default: --timesteps, else n_timesteps)
     params:                 # any key of the hyperparameter file; dots reach into mappings
@@ -86,13 +86,21 @@ from .fanout import (
 from .settings import TrainOptions, TrainSettings, resolve_settings
 
 __all__ = ["Search", "SweepSpec", "load_sweep", "expand_trials", "apply_overrides",
-           "final_eval_return", "rank_trials", "write_table", "run_sweep"]
+           "final_eval_return", "rank_trials", "write_table", "run_sweep", "MAX_TRIALS",
+           "MAX_SEEDS_PER_TRIAL"]
 
 FILE_KEYS = ("search", "seeds_per_trial", "num_samples", "sample_seed", "timesteps", "params",
              "asha")
 DISTRIBUTIONS = ("values", "uniform", "loguniform", "randint")
 ASHA_KEYS = ("chunks", "grace_period", "reduction_factor")
 OPTUNA_PIP = "pip install optuna"
+MAX_TRIALS = 10_000
+"""Most trials of a sweep (a grid's product of value counts, or ``num_samples``); each
+trial is a set of runs, so 10^4 trials is already months of training. Checked before
+the grid is expanded (a grid of 10^12 trials ran out of memory)."""
+MAX_SEEDS_PER_TRIAL = 100
+"""Most seeds per trial (``seeds_per_trial`` or ``--seeds``): a median over 100 seeds is
+as stable as a ranking needs (1e9 seeds hung while the jobs were listed)."""
 
 
 class Search(Enum):
@@ -129,12 +137,14 @@ class SweepSpec:
     asha: dict
 
 
-def _int(doc, key, default, low, path):
+def _int(doc, key, default, low, path, high=None):
     value = doc.get(key, default)
     if value is None and default is None:
         return None
-    if isinstance(value, bool) or not isinstance(value, int) or value < low:
-        raise ConfigError(f"{path}: {key} must be an integer >= {low}, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int) or value < low \
+            or (high is not None and value > high):
+        allowed = f">= {low}" if high is None else f"in [{low}, {high}]"
+        raise ConfigError(f"{path}: {key} must be an integer {allowed}, got {value!r}")
     return value
 
 
@@ -165,6 +175,9 @@ def load_sweep(path: Path) -> SweepSpec:
         raise ConfigError(f"{path}: search must be one of {[s.value for s in Search]}, got "
                           f"{doc.get('search')!r}") from None
     seeds = _int(doc, "seeds_per_trial", 3, 1, path)
+    if seeds > MAX_SEEDS_PER_TRIAL:
+        raise ConfigError(f"{path}: seeds_per_trial must be an integer in [2, "
+                          f"{MAX_SEEDS_PER_TRIAL}], got {seeds!r}")
     if seeds < 2:
         raise ConfigError(f"{path}: seeds_per_trial must be >= 2, got {seeds}: a ranking of "
                           "single-seed trials ranks lucky seeds (rl-baselines3-zoo #204, #151)")
@@ -181,7 +194,13 @@ def load_sweep(path: Path) -> SweepSpec:
     asha = {"chunks": _int(asha, "chunks", 4, 1, path),
             "grace_period": _int(asha, "grace_period", 1, 1, path),
             "reduction_factor": _int(asha, "reduction_factor", 2, 2, path)}
-    return SweepSpec(search, seeds, _int(doc, "num_samples", 8, 1, path),
+    if search is Search.GRID:
+        n_trials = math.prod(len(arg) for _, arg in params.values())
+        if n_trials > MAX_TRIALS:
+            counts = " x ".join(str(len(arg)) for _, arg in params.values())
+            raise ConfigError(f"{path}: the grid has {counts} = {n_trials} trials; allowed: at "
+                              f"most {MAX_TRIALS} (search: random draws num_samples of them)")
+    return SweepSpec(search, seeds, _int(doc, "num_samples", 8, 1, path, MAX_TRIALS),
                      _int(doc, "sample_seed", 0, 0, path), _int(doc, "timesteps", None, 1, path),
                      params, asha)
 
@@ -362,9 +381,9 @@ def run_sweep(options: TrainOptions) -> int:
         raise ConfigError("run_sweep needs --sweep FILE.yml")
     spec = load_sweep(options.sweep)
     if options.seeds is not None:
-        if options.seeds < 2:
+        if not 2 <= options.seeds <= MAX_SEEDS_PER_TRIAL:
             raise ConfigError(f"--seeds {options.seeds} with --sweep: seeds per trial must be "
-                              ">= 2")
+                              f">= 2 and <= {MAX_SEEDS_PER_TRIAL}")
         spec = replace(spec, seeds_per_trial=options.seeds)
     typed = set(options.user_env_kwargs)
     clash = sorted(k for k in spec.params if k.startswith("env_kwargs.")
