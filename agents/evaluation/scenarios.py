@@ -16,8 +16,9 @@ Besides the built-in suites (:data:`SUITES`), a suite can be a YAML file::
 
 read with :func:`~tether_gym_agents.common.yamlio.load_yaml_file` (no code is executed;
 no anchors or aliases; at most 256 KiB; lists become tuples). The ``nominal`` values are
-checked as the env checks them (masses > 0, 0 <= e < 1, reel_time_constant and
-accel_limit > 0) when the file is read.
+checked as the env checks them (masses > 0, one per tether of the chain the scenario
+is written for, 0 <= e < 1, reel_time_constant and accel_limit > 0) when the file is
+read.
 
 **Any number of bodies.** Scenarios are written for the env's default chain (the
 paper's, :data:`WRITTEN_FOR` = 3 bodies, 2 tethers); :meth:`Scenario.for_bodies` gives
@@ -104,14 +105,36 @@ def _n_bodies(kwargs: dict) -> int | None:
     return None
 
 
-def _check_nominal(nominal: dict, where: str) -> None:
-    """Raise ValueError unless the nominal model's values are ones the env accepts."""
+def _written_tethers(env_kwargs: dict) -> int:
+    """The number of tethers a scenario's ``env_kwargs`` are written for.
+
+    Its ``n_bodies`` - 1 when it gives a valid one, else the length of its ``masses``
+    when it gives them, else the default chain's (:data:`WRITTEN_FOR` - 1).
+    """
+    n_bodies = _n_bodies(env_kwargs) if "n_bodies" in env_kwargs else None
+    if n_bodies is not None:
+        return n_bodies - 1
+    masses = env_kwargs.get("masses")
+    if isinstance(masses, (list, tuple)) and masses:
+        return len(masses)
+    return WRITTEN_FOR - 1
+
+
+def _check_nominal(nominal: dict, where: str, env_kwargs: dict | None = None) -> None:
+    """Raise ValueError unless the nominal model's values are ones the env accepts.
+
+    With ``env_kwargs`` (a suite file's scenario as written), its ``masses`` must have
+    one entry per tether of the chain they are written for (:func:`_written_tethers`);
+    without (a :class:`Scenario` made in code, or by :meth:`Scenario.for_bodies` for a
+    chain its ``env_kwargs`` do not name), any number of entries.
+    """
     from tether_gym.envs import EnvConfig
     from tether_gym.params import check_masses
 
     try:
         if "masses" in nominal:
-            check_masses(nominal["masses"])
+            n = None if env_kwargs is None else _written_tethers(env_kwargs)
+            check_masses(nominal["masses"], n)
         EnvConfig.from_kwargs(**{k: v for k, v in nominal.items() if k != "masses"})
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{where}: nominal {exc}") from None
@@ -334,7 +357,7 @@ def load_suite_file(path) -> tuple[Scenario, ...]:
             raise ValueError(f"{where} ({name}): 'nominal' must be a mapping of one or "
                              f"more of the keys {list(NOMINAL_KEYS)}, got {nominal!r}")
         if nominal is not None:
-            _check_nominal(nominal, f"{where} ({name})")
+            _check_nominal(nominal, f"{where} ({name})", env_kwargs)
         out.append(Scenario(name, str(item.get("description", "")), _tuples(env_kwargs),
                             _tuples(nominal)))
     return tuple(out)

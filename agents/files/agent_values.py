@@ -6,14 +6,17 @@ policy is allocated or the weights are read; a value out of bounds is an
 allowed. The bounds (see :mod:`.safe_format`):
 
 * ``env.id``: an env id that tether_gym registers (``tether_gym/...``), or null.
-* ``env.kwargs``: a mapping (its values are checked by ``gym.make``).
+* ``env.kwargs``: a mapping that tether_gym's own check of ``gym.make``'s arguments
+  (``EnvConfig.from_kwargs``: known names, finite values in range) accepts; no env is
+  built.
 * ``obs_normalization``: ``mean`` finite with ``|mean|`` <= :data:`MAX_OBS_MEAN`,
   ``var`` finite in [0, :data:`MAX_OBS_VAR`], ``var + epsilon`` > 0 (the divisor's
   square), ``clip_obs`` a finite number > 0, ``epsilon`` a finite number in [0, 1],
   ``count`` (optional) a finite number >= 0.
 * ``observation_space`` / ``action_space``: a shape of 1 to :data:`MAX_SPACE_DIMS` axes
   whose sizes multiply to 1 .. :data:`MAX_SPACE_SIZE`; a Box's ``low`` and ``high`` one
-  entry per element, each a number or +-inf (never NaN), ``low`` <= ``high``.
+  entry per element, each a number or +-inf (never NaN; the action space's finite),
+  ``low`` <= ``high``.
 * ``policy_kwargs.net_arch``: a list of layer widths, or a mapping of such lists (the
   algorithm's ``net_keys``: ``pi``/``vf`` for PPO; ``pi``/``qf`` for SAC, TQC and TD3);
   each width an integer in 1 .. :data:`MAX_WIDTH`, each list at most :data:`MAX_DEPTH`
@@ -34,7 +37,7 @@ from pathlib import Path
 
 from ..common.algorithms import algorithm
 
-__all__ = ["ValueProblem", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS",
+__all__ = ["ValueProblem", "check_running_stats", "MAX_WIDTH", "MAX_DEPTH", "MAX_PARAMETERS",
            "MAX_SPACE_SIZE", "MAX_SPACE_DIMS", "MAX_OBS_MEAN", "MAX_OBS_VAR", "LOG_STD_MIN",
            "LOG_STD_MAX", "WEIGHT_DTYPES", "check_values", "check_weights",
            "tether_gym_env_ids"]
@@ -87,16 +90,64 @@ def _number(value, key: str, allowed: str, ok) -> None:
 
 
 def check_env(env) -> None:
-    """``env.id`` a tether_gym id or null, ``env.kwargs`` a mapping."""
+    """``env.id`` a tether_gym id or null, ``env.kwargs`` arguments the env accepts."""
     if not isinstance(env, dict):
         raise ValueProblem(f"env={env!r}; allowed: a mapping with 'id' and 'kwargs'")
     ids = tether_gym_env_ids()
     if env.get("id") is not None and env.get("id") not in ids:
         raise ValueProblem(f"env.id={env.get('id')!r} is not a tether_gym env; allowed: "
                            f"{ids} or null")
-    if not isinstance(env.get("kwargs", {}), dict):
-        raise ValueProblem(f"env.kwargs={env.get('kwargs')!r}; allowed: a mapping of "
+    kwargs = env.get("kwargs", {})
+    if not isinstance(kwargs, dict):
+        raise ValueProblem(f"env.kwargs={kwargs!r}; allowed: a mapping of "
                            "gym.make arguments")
+    from tether_gym.envs import EnvConfig
+
+    try:  # the env's own validation of gym.make's arguments; nothing is built
+        EnvConfig.from_kwargs(**kwargs)
+    except (TypeError, ValueError) as exc:
+        raise ValueProblem(f"env.kwargs: {' '.join(str(exc).split())}") from None
+
+
+_STATS = {"mean": (lambda v: abs(v) <= MAX_OBS_MEAN,
+                   f"finite numbers with |mean| <= {MAX_OBS_MEAN:g}"),
+          "var": (lambda v: 0 <= v <= MAX_OBS_VAR,
+                  f"finite numbers >= 0 and <= {MAX_OBS_VAR:g}")}
+
+
+def _statistic(value, key: str, kind: str) -> float:
+    """One entry of a running ``mean`` or ``var`` (``kind``) within the bounds above."""
+    ok, allowed = _STATS[kind]
+    number = value
+    if isinstance(value, str):  # float_list writes inf and nan as strings
+        try:
+            number = float(value)
+        except ValueError:
+            pass
+    if not _is_number(number) or not math.isfinite(number) or not ok(number):
+        raise ValueProblem(f"{key}={value!r}; allowed: {allowed}")
+    return number
+
+
+def check_running_stats(name: str, mean, var, count) -> None:
+    """A running mean/variance (VecNormalize's, as a checkpoint's ``.npz`` holds them).
+
+    ``mean`` and ``var`` array-likes whose entries lie in the bounds of
+    ``obs_normalization`` (module docstring), ``count`` a finite number >= 0.
+
+    Raises
+    ------
+    ValueProblem
+        ``"<name>_mean[i]=nan; allowed: ..."`` for the first entry out of bounds.
+    """
+    import numpy as np
+
+    for kind, values in (("mean", mean), ("var", var)):
+        for i, value in enumerate(np.asarray(values, dtype=np.float64).ravel().tolist()):
+            _statistic(value, f"{name}_{kind}[{i}]", kind)
+    number = np.asarray(count, dtype=np.float64)
+    if number.size != 1 or not math.isfinite(float(number)) or float(number) < 0:
+        raise ValueProblem(f"{name}_count={count!r}; allowed: a finite number >= 0")
 
 
 def check_normalization(norm) -> None:
@@ -112,24 +163,13 @@ def check_normalization(norm) -> None:
     if "count" in norm:
         _number(norm["count"], "obs_normalization.count", "a finite number >= 0",
                 lambda v: v >= 0)
-    for key, ok, allowed in (("mean", lambda v: abs(v) <= MAX_OBS_MEAN,
-                              f"finite numbers with |mean| <= {MAX_OBS_MEAN:g}"),
-                             ("var", lambda v: 0 <= v <= MAX_OBS_VAR,
-                              f"finite numbers >= 0 and <= {MAX_OBS_VAR:g}")):
+    for key in ("mean", "var"):
         values = norm.get(key)
         if not isinstance(values, list):
             raise ValueProblem(f"obs_normalization.{key}={values!r}; allowed: a list of "
-                               f"{allowed}")
+                               f"{_STATS[key][1]}")
         for i, value in enumerate(values):
-            number = value
-            if isinstance(value, str):  # float_list writes inf and nan as strings
-                try:
-                    number = float(value)
-                except ValueError:
-                    pass
-            if not _is_number(number) or not math.isfinite(number) or not ok(number):
-                raise ValueProblem(f"obs_normalization.{key}[{i}]={value!r}; allowed: "
-                                   f"{allowed}")
+            number = _statistic(value, f"obs_normalization.{key}[{i}]", key)
             if key == "var" and number + norm["epsilon"] <= 0:
                 raise ValueProblem(f"obs_normalization.var[{i}]={value!r} with epsilon="
                                    f"{norm['epsilon']!r} divides by zero; allowed: var + "
@@ -245,8 +285,12 @@ def _bound(value) -> float | None:
     return None
 
 
-def check_box(space, key: str, size: int) -> None:
-    """A Box's ``low`` and ``high``: ``size`` numbers (or +-inf) each, ``low <= high``."""
+def check_box(space, key: str, size: int, finite: bool = False) -> None:
+    """A Box's ``low`` and ``high``: ``size`` numbers (or +-inf) each, ``low <= high``.
+
+    With ``finite`` (the action space: actions are scaled from its bounds) +-inf is
+    refused too.
+    """
     if space.get("type") != "Box":
         return  # reported by space_from_json (only Box spaces are read)
     bounds = {}
@@ -260,6 +304,9 @@ def check_box(space, key: str, size: int) -> None:
             if number is None:
                 raise ValueProblem(f"{key}.{side}[{i}]={value!r}; allowed: a number, "
                                    "'inf' or '-inf' (not NaN)")
+            if finite and not math.isfinite(number):
+                raise ValueProblem(f"{key}.{side}[{i}]={value!r}; allowed: a finite number "
+                                   "(actions are scaled between low and high)")
     for i, (low, high) in enumerate(zip(bounds["low"], bounds["high"], strict=True)):
         if not low <= high:  # type: ignore[operator]
             raise ValueProblem(f"{key}.low[{i}]={low!r} > {key}.high[{i}]={high!r}; "
@@ -301,7 +348,7 @@ def check_values(meta: dict, meta_path: Path) -> None:
         n_obs = space_size(meta["observation_space"], "observation_space")
         n_act = space_size(meta["action_space"], "action_space")
         check_box(meta["observation_space"], "observation_space", n_obs)
-        check_box(meta["action_space"], "action_space", n_act)
+        check_box(meta["action_space"], "action_space", n_act, finite=True)
         check_net_arch(meta["algo"], meta["policy_kwargs"], n_obs, n_act)
         check_policy_numbers(meta["policy_kwargs"])
         check_normalization(meta["obs_normalization"])

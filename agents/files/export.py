@@ -68,14 +68,21 @@ def export_runs(src, dest) -> list[Path]:
     Raises
     ------
     AgentLoadError
-        Naming a run without a safe agent, a file that leads outside ``src``, is not a
+        Naming a destination that is a file or the source folder itself, a run without
+        a safe agent, a file that leads outside ``src``, is not a
         regular file (a symlink to ``/etc/passwd``, a FIFO), is over its cap or is a
         hard link, or a symlinked folder below ``dest``: nothing is copied then.
     """
     src, dest = Path(src), Path(dest)
+    if (dest.exists() or dest.is_symlink()) and not dest.is_dir():
+        raise AgentLoadError(f"export destination {dest} is a file, not a folder; give a new "
+                             "or an existing folder")
     runs = seed_runs(src)
     pairs = [(run, dest / run.name) for run in runs] if runs else [(src, dest)]
-    for run, _ in pairs:
+    for run, out in pairs:
+        if out.exists() and out.resolve() == run.resolve():
+            raise AgentLoadError(f"export destination {out} is the run folder {run} itself; "
+                                 "give another folder")
         for name in (AGENT_FILE, WEIGHTS_FILE):  # a FIFO there: named, not "no agent"
             if (run / name).exists() or (run / name).is_symlink():
                 checked_file(src, run / name)

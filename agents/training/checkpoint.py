@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from ..files.agent_values import check_running_stats
 from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import atomic_target
 
@@ -52,13 +53,22 @@ def load_stats_npz(envs, path: Path) -> None:
     Raises
     ------
     ValueError
-        When the file is damaged or its shapes do not fit the env (path in message).
+        When the file is damaged, its shapes do not fit the env or a statistic is out
+        of the bounds an agent file's ``obs_normalization`` has
+        (:func:`~tether_gym_agents.files.agent_values.check_running_stats`: NaN, inf,
+        a negative variance...); the path is in the message.
     """
     arrays = _load_npz(path)
     missing = [k for k in ("obs_mean", "obs_var", "obs_count", "ret_mean", "ret_var",
                            "ret_count") if k not in arrays]
     if missing:
         raise ValueError(f"{path}: damaged (no {', '.join(missing)})")
+    for name in ("obs", "ret"):  # NaN here failed in torch's Normal updates later
+        try:
+            check_running_stats(name, arrays[f"{name}_mean"], arrays[f"{name}_var"],
+                                arrays[f"{name}_count"])
+        except (TypeError, ValueError) as exc:  # ValueProblem among them
+            raise ValueError(f"{path}: {exc}") from None
     for env in envs:
         _set_stats(env, arrays, path)
 
