@@ -238,10 +238,15 @@ def train_config() -> list[Input]:
         ("sac.tau.2", "tau", 2.0), ("sac.learning_starts.neg", "learning_starts", -1),
         ("sac.train_freq.text", "train_freq", "abc"),
         ("sac.gradient_steps.huge", "gradient_steps", 10 ** 9),
-        ("sac.ent_coef.text", "ent_coef", "auto_abc"), ("sac.n_steps", "n_steps", 64),
+        ("sac.ent_coef.text", "ent_coef", "auto_abc"),
+        ("sac.n_steps.huge", "n_steps", 10 ** 9),
     ]
     out += [_config_input(i, f"(sac) {k}: {v!r}", "invalid", algo="sac", change=_set(k, v))
             for i, k, v in sac]
+    # SAC, TD3 and TQC take n_steps (n-step returns, stable-baselines3 >= 2.6): in range,
+    # a valid value
+    out.append(_config_input("sac.n_steps", "(sac) n_steps: 64", "valid", algo="sac",
+                             change=_set("n_steps", 64)))
     out.append(_config_input("td3.n_critics.huge", "(td3) policy_kwargs.n_critics: 1000000",
                              "invalid", algo="td3",
                              change=_set("policy_kwargs.n_critics", 1000000)))
