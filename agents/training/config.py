@@ -28,7 +28,7 @@ __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_
            "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
            "check_env_id", "algo_class", "check_algo_params", "check_counts", "fit_rollout",
-           "NOISE_TYPES", "NOISE_STD_MAX", "action_noise"]
+           "NOISE_TYPES", "NOISE_STD_MAX", "action_noise", "MAX_TIMESTEPS"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
@@ -39,6 +39,8 @@ of standard deviation ``noise_std`` on every action entry, in the policy's actio
 [-1, 1], for the algorithms whose row says ``action_noise`` (SAC, TQC, TD3)."""
 NOISE_STD_MAX = 1.0
 """Largest ``noise_std``: the half width of the policy's action box [-]."""
+MAX_TIMESTEPS = 10**12
+"""Most env steps one run trains (the shipped runs train 3e6; 1e30 would never end)."""
 NORMALIZE_KEYS = ("norm_obs", "norm_reward", "clip_obs", "clip_reward", "gamma", "epsilon")
 
 # A fixed value the user types clears the config's random range of the same quantity.
@@ -207,6 +209,9 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
     if not isinstance(doc, dict) or not all(isinstance(v, (dict, type(None)))
                                             for v in doc.values()):
         raise ConfigError(f"{path} must map env ids (and 'default') to hyperparameters")
+    if env_id not in doc and "default" not in doc:  # an empty file too: no silent defaults
+        raise ConfigError(f"{path} has no block for {env_id} and no 'default' block (blocks: "
+                          f"{sorted(map(str, doc))})")
     params = dict(doc.get("default") or {})
     params.update(doc.get(env_id) or {})
     algo_class(algo)  # a missing library is reported before the file is read further
@@ -253,6 +258,9 @@ def check_counts(params: dict, source: str) -> None:
             if isinstance(value, bool) or not isinstance(value, (int, float)) \
                     or not math.isfinite(value) or value < 1 or value != int(value):
                 raise ConfigError(f"{source}: {key}: {value!r} must be a whole number >= 1")
+    if params.get("n_timesteps", 1) > MAX_TIMESTEPS:
+        raise ConfigError(f"{source}: n_timesteps: {params['n_timesteps']!r} must be a whole "
+                          f"number in [1, {MAX_TIMESTEPS}]")
 
 
 def residual_spec(value, source: str) -> ResidualSpec | None:
@@ -367,11 +375,19 @@ def resolve_env_kwargs(config_kwargs: dict, user_kwargs: dict, source: str,
 
 
 def check_env(env_id: str, kwargs: dict, items: list[str], source: str) -> None:
-    """Build the env once with the resolved kwargs: bad values fail here, before training."""
+    """Build the env once with the resolved kwargs: bad values fail here, before training.
+
+    ``render_mode`` is None or ``'rgb_array'`` (the training envs are stepped in one
+    vector env, which opens no window).
+    """
+    typed = f"--env-kwargs {' '.join(items)}" if items else "no --env-kwargs"
+    if kwargs.get("render_mode") not in (None, "rgb_array"):
+        raise ConfigError(f"invalid env kwargs ({typed}; {source}): render_mode="
+                          f"{kwargs['render_mode']!r} must be None or 'rgb_array' (training "
+                          "steps its envs in one vector env, which opens no window)")
     try:
         env = gym.make(env_id, **kwargs)
     except (ValueError, TypeError) as exc:
-        typed = f"--env-kwargs {' '.join(items)}" if items else "no --env-kwargs"
         raise ConfigError(f"invalid env kwargs ({typed}; {source}): {exc}") from None
     env.close()
 

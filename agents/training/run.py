@@ -171,6 +171,9 @@ def _previous_info(out: Path) -> dict:
     """``train_info.json`` of the run being resumed; ``{}`` (with a warning) if damaged."""
     try:
         info = read_train_info(out)
+        steps = info.get("num_timesteps", 0) if isinstance(info, dict) else 0
+        if isinstance(steps, bool) or not isinstance(steps, int) or steps < 0:
+            raise ValueError(f"num_timesteps {steps!r} is not a whole number >= 0")
     except ValueError as exc:
         print(f"warning: {out / TRAIN_INFO_FILE} is damaged ({exc}); the wall time of the "
               "earlier calls is lost, the run continues", file=sys.stderr)

@@ -39,6 +39,7 @@ from ..files.safe_format import ALGOS
 from ..hybrids.residual_spec import ResidualSpec
 from .config import (
     CONFIG_DIR,
+    MAX_TIMESTEPS,
     RUN_KEYS,
     ConfigError,
     check_algo_params,
@@ -62,6 +63,11 @@ SEED_MAX = 2**31 - 1
 RAY_ADDRESS_FORMS = "'auto', 'local', HOST:PORT or ray://HOST:PORT (PORT in 1 ... 65535)"
 _AT_LEAST_ONE = ("n_envs", "timesteps", "eval_freq", "checkpoint_freq", "eval_episodes",
                  "torch_threads", "seeds")
+_AT_MOST = {"timesteps": MAX_TIMESTEPS, "eval_episodes": 10_000, "seeds": 1000}
+"""Upper bounds of options that would otherwise run without end (1e30 steps, 1e9
+episodes per evaluation, 1e9 Ray tasks)."""
+_WHY = {"timesteps": "env steps to train; the shipped runs train 3e6",
+        "eval_episodes": "episodes per evaluation", "seeds": "training runs"}
 _PATHS = ("config", "out", "sweep")
 """Options that name files: made absolute in :meth:`TrainOptions.argv` (other nodes)."""
 
@@ -105,8 +111,12 @@ class TrainOptions:
             raise ConfigError(f"--algo {self.algo!r}: must be one of {list(ALGOS)}")
         for name in _AT_LEAST_ONE:
             value = getattr(self, name)
+            high = _AT_MOST.get(name)
             if value is not None and value < 1:
                 raise ConfigError(f"{_flag(name)} {value}: must be an integer >= 1")
+            if value is not None and high is not None and value > high:
+                raise ConfigError(f"{_flag(name)} {value}: must be an integer in [1, {high}] "
+                                  f"({_WHY[name]})")
         if not 0 <= self.seed <= SEED_MAX:
             raise ConfigError(f"--seed {self.seed}: must be an integer in [0, {SEED_MAX}]")
         if self.config is not None:

@@ -271,3 +271,50 @@ def test_no_training_docstring_names_only_some_algorithms():
                                                 *sorted((root / "training").glob("*.py"))]
              if any(s in p.read_text() for s in ("PPO or SAC", '``"ppo"``, ``"sac"`` or'))]
     assert not stale
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--timesteps", "1" + "0" * 30],
+     "--timesteps 1" + "0" * 30 + ": must be an integer in [1, 1000000000000]"),
+    (["--eval-episodes", "1000000000"], "--eval-episodes 1000000000: must be an integer in "
+                                        "[1, 10000]"),
+    (["--seeds", "1000000000", "--ray-address", "127.0.0.1:1"],
+     "--seeds 1000000000: must be an integer in [1, 1000]"),
+    (["--env-kwargs", "render_mode='human'"], "invalid env kwargs (--env-kwargs "
+                                              "render_mode='human'; "),
+])
+def test_options_that_would_run_without_end_are_bounded(tmp_path, capsys, no_training, args,
+                                                        message):
+    """From the hostile-input sweep: before, the first three ran past a 60 s timeout (never
+    ending) and render_mode='human' was a ValueError traceback from the vector env."""
+    out = tmp_path / "run"
+    assert main([*args, "--out", str(out), "--no-progress"]) == 2
+    assert _one_line(capsys).startswith(f"train.py: error: {message}")
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("text", ["", "null\n", "foo/Bar-v0: {n_envs: 2}\n"])
+def test_a_config_without_a_block_for_the_env_is_refused(tmp_path, capsys, no_training, text):
+    """Before: an empty file (or one for another env id) trained 100000 steps with SB3's
+    defaults and no env kwargs."""
+    config = tmp_path / "c.yml"
+    config.write_text(text)
+    assert main(["--config", str(config), "--out", str(tmp_path / "run"),
+                 "--no-progress"]) == 2
+    assert _one_line(capsys).startswith(f"train.py: error: {config} has no block for {ENV} "
+                                        "and no 'default' block")
+
+
+def test_resume_with_a_non_numeric_step_count_in_train_info_continues(tiny_run, tmp_path,
+                                                                      capsys):
+    """Before: ``ValueError: cannot convert float NaN to integer``; now the damaged record
+    is reported (the wall time of earlier calls is lost) and the run continues."""
+    import json
+
+    out = _copy(tiny_run, tmp_path)
+    info = json.loads((out / "train_info.json").read_text())
+    (out / "train_info.json").write_text(json.dumps({**info, "num_timesteps": "abc"}))
+    assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 0
+    assert "train_info.json is damaged (num_timesteps 'abc' is not a whole number >= 0)" \
+        in capsys.readouterr().err
+    assert json.loads((out / "train_info.json").read_text())["num_timesteps"] == 128
