@@ -155,7 +155,12 @@ def test_huge_sweeps_are_refused_before_expanding(tmp_path, capsys, case):
 def test_sweep_seeds_option_is_bounded(tmp_path, capsys):
     sweep = tmp_path / "sweep.yml"
     sweep.write_text("search: grid\nparams:\n  gamma: [0.9, 0.99]\n")
-    assert train_main(["--algo", "ppo", "--sweep", str(sweep), "--seeds", "1000000000",
+    for seeds in ("500", "1000000000"):  # the latter is refused by train.py's own bound
+        assert train_main(["--algo", "ppo", "--sweep", str(sweep), "--seeds", seeds,
+                           "--out", str(tmp_path / "s"), *TINY[:2]]) == 2
+        assert seeds in _one_line(capsys, "train.py: error: --seeds")
+    assert not (tmp_path / "s").exists()
+    assert train_main(["--algo", "ppo", "--sweep", str(sweep), "--seeds", "500",
                        "--out", str(tmp_path / "s"), *TINY[:2]]) == 2
     assert "seeds per trial must be >= 2 and <= 100" in _one_line(capsys, "train.py: error:")
 
