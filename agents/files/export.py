@@ -10,6 +10,7 @@ are never hard links (``train.py`` writes each one new); copy the file (``cp``) 
 it. It writes only into folders it creates or that already are real folders inside the
 destination: a symlinked ``DEST/eval`` (or any symlink below ``DEST``) is refused, never
 written through, and a symlink at a destination file name is replaced, not followed.
+A destination that is a file, or that is the source run folder itself, is refused.
 Every check is made before anything is written.
 """
 
