@@ -271,7 +271,7 @@ def test_partial_seed_is_resumed_as_train_py_resume(tmp_path, monkeypatch):
     (run / "checkpoints").mkdir(parents=True)
     (run / "checkpoints" / "model_48_steps.zip").write_bytes(b"")
     (run / "config.yml").write_text(yaml.safe_dump({"algo": "ppo", "hyperparams": {
-        "n_steps": 16, "normalize": False, "n_envs": 2, "eval_freq": 32,
+        "n_steps": 16, "batch_size": 32, "normalize": False, "n_envs": 2, "eval_freq": 32,
         "checkpoint_freq": 16, "env_kwargs": {"orbits_per_episode": 0.05}}}))
     assert main(["--seeds", "1", "--out", str(tmp_path / "fan"), "--timesteps", "64"]) == 0
     (settings,) = calls
