@@ -36,7 +36,7 @@ from ..evaluation.benchmark import (
     evaluate,
     new_out_dir,
 )
-from ..evaluation.registry import BASELINES, default_policies, resolve_policy, reusing
+from ..evaluation.registry import BASELINES, default_policies, resolve_policy
 from ..evaluation.results import markdown_tables
 from ..evaluation.scenarios import describe_suites, get_suite
 from ..files.trained import refuse_special_file
@@ -212,9 +212,8 @@ def _bench(args: argparse.Namespace, command: str) -> int:
         options = EvalOptions(out=args.out, plots=not args.no_plots,
                               torch_threads=args.torch_threads, command=command,
                               allow_pickle=args.allow_pickle)
-        with reusing(specs, args.allow_pickle):  # the agents loaded above, not again
-            results = evaluate(policies, args.suite, args.seeds, args.seed,
-                               env_kwargs, options)
+        results = evaluate([specs[name] for name in policies], args.suite, args.seeds,
+                           args.seed, env_kwargs, options)  # the agents loaded above
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)
         _remove_if_made_empty(args.out, made)

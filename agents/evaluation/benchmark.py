@@ -165,17 +165,19 @@ def new_out_dir(parent: str | Path = DEFAULT_OUT_PARENT) -> Path:
     raise ValueError(f"{str(parent)!r} holds 999 results folders of {stamp}; give --out")
 
 
-def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, seed: int = 0,
-             env_kwargs: dict | None = None, options: EvalOptions | None = None,
+def evaluate(policies: list[str | PolicySpec], suite: str = "default", n_seeds: int = 10,
+             seed: int = 0, env_kwargs: dict | None = None,
+             options: EvalOptions | None = None,
              **option_fields) -> dict:
     """Evaluate ``policies`` on every scenario of ``suite``; return the results dict.
 
     Parameters
     ----------
-    policies : list of str
+    policies : list of str or PolicySpec
         Policy names: registered policies (the baselines and those added with
         :func:`~.registry.register_policy`), shipped agents, ``handover:AGENT`` or paths
-        (:mod:`.registry`).
+        (:mod:`.registry`); or specs already resolved (and loaded) by
+        :func:`~.registry.resolve_policy`, used as they are.
     suite : str
         A built-in suite name or a YAML suite file (:mod:`.scenarios`).
     n_seeds : int
@@ -203,9 +205,9 @@ def evaluate(policies: list[str], suite: str = "default", n_seeds: int = 10, see
     seeds = _seeds(n_seeds, seed)
     env_kwargs = dict(env_kwargs or {})
     scenarios = get_suite(suite)
-    if opts.out is not None:
+    specs = _resolve_all(policies, opts.allow_pickle)  # before --out: a refused agent
+    if opts.out is not None:                           # leaves no folder behind
         check_out_dir(opts.out, "out")
-    specs = _resolve_all(policies, opts.allow_pickle)
     _set_torch_threads(specs, opts.torch_threads)
     t_start = time.perf_counter()
     log(f"building {len(scenarios)} scenario env(s) and loading {len(specs)} policies (the "
@@ -236,9 +238,10 @@ def _seeds(n_seeds: int, seed: int) -> list[int]:
     return [seed + i for i in range(n_seeds)]
 
 
-def _resolve_all(policies: list[str], allow_pickle: bool) -> list[PolicySpec]:
-    """Every policy's spec; a policy named twice is a ValueError."""
-    specs = [resolve_policy(p, allow_pickle) for p in policies]
+def _resolve_all(policies: list[str | PolicySpec], allow_pickle: bool) -> list[PolicySpec]:
+    """Every policy's spec (a spec given is kept); a policy named twice is a ValueError."""
+    specs = [p if isinstance(p, PolicySpec) else resolve_policy(p, allow_pickle)
+             for p in policies]
     names = [s.name for s in specs]
     if len(set(names)) != len(names):
         raise ValueError(f"policies {names} name one policy twice")

@@ -31,11 +31,10 @@ like ``smc`` and ``smc_filtered``, design on the scenario's nominal model
 
 from __future__ import annotations
 
-import contextlib
 import difflib
 import re
 import warnings
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from enum import Enum
 from importlib import metadata
@@ -50,7 +49,7 @@ from .scenarios import Scenario
 
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
            "resolve_policy", "make_policy", "default_policies",
-           "shipped_agents", "load_plugins", "reusing", "BASELINES", "OPT_IN", "HANDOVER",
+           "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
            "HANDOVER_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
            "TRAINED_ON_KEYS", "trained_on"]
 
@@ -495,27 +494,6 @@ def default_policies() -> list[str]:
             + [HANDOVER + name for name in HANDOVER_OF if name in shipped])
 
 
-_REUSED: dict[tuple[str, bool], PolicySpec] = {}
-"""Specs that :func:`resolve_policy` returns as they are, inside :func:`reusing`."""
-
-
-@contextlib.contextmanager
-def reusing(specs: Mapping[str, PolicySpec], allow_pickle: bool = False) -> Iterator[None]:
-    """Inside the block, :func:`resolve_policy` returns ``specs[name]`` for these names.
-
-    ``evaluate.py`` loads every agent before it makes its output folder (a refused agent
-    then leaves no folder behind) and evaluates the same, loaded specs, without loading
-    them a second time.
-    """
-    added = {(name, allow_pickle): spec for name, spec in specs.items()}
-    _REUSED.update(added)
-    try:
-        yield
-    finally:
-        for key in added:
-            _REUSED.pop(key, None)
-
-
 def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     """PolicySpec of a registered name, ``handover:AGENT``, a shipped agent or a path.
 
@@ -525,8 +503,6 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     """
     if not isinstance(name, str):
         raise TypeError(f"policy name must be a str, got {type(name).__name__} {name!r}")
-    if (name, allow_pickle) in _REUSED:
-        return _REUSED[name, allow_pickle]
     if name in _REGISTRY:
         return _registered_spec(name)
     if name.startswith(HANDOVER):

@@ -100,7 +100,8 @@ def test_a_name_too_long_for_a_path_is_one_short_line(prefix, capsys):
 
 def test_each_agent_is_loaded_once(tmp_path, monkeypatch):
     """Loading every agent before --out is made does not load it a second time for the
-    evaluation (``registry.reusing``): one ``TrainedAgent.load`` per run folder."""
+    evaluation (the specs evaluate.py loaded are passed to ``benchmark.evaluate`` as
+    they are): one ``TrainedAgent.load`` per run folder."""
     from tether_gym_agents.files.trained import TrainedAgent
 
     calls = []
@@ -116,7 +117,6 @@ def test_each_agent_is_loaded_once(tmp_path, monkeypatch):
                  "--env-kwargs", "orbits_per_episode=0.2", "--out",
                  str(tmp_path / "out")]) == 0
     assert len(calls) == runs
-    assert not registry._REUSED  # the block restored the registry
 
 
 def test_curves_error_leaves_no_out_folder(tmp_path, capsys):
