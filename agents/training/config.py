@@ -227,9 +227,10 @@ def load_hyperparams(path: Path, algo: str, env_id: str) -> dict:
     if isinstance(norm, dict):
         bad = sorted(set(norm) - set(NORMALIZE_KEYS))
         if bad:
-            raise ConfigError(f"unknown normalize key(s) {bad}; valid: {list(NORMALIZE_KEYS)}")
+            raise ConfigError(f"{path}: unknown normalize key(s) {bad}; valid: "
+                              f"{list(NORMALIZE_KEYS)}")
     elif not isinstance(norm, bool):
-        raise ConfigError(f"normalize must be true, false or a dict, got {norm!r}")
+        raise ConfigError(f"{path}: normalize must be true, false or a dict, got {norm!r}")
     check_counts(params, str(path))
     if not isinstance(params.get("env_kwargs") or {}, dict):
         raise ConfigError(f"{path}: env_kwargs must be a mapping, got {params['env_kwargs']!r}")

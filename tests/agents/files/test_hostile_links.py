@@ -110,16 +110,16 @@ def test_resume_refuses_files_linked_out_of_the_run(run, tmp_path, capsys, name)
     assert f"{run / name} leads outside {run} (to {target})" in _err(capsys)
 
 
-def test_a_linked_train_info_is_not_read_and_replaced_not_written_through(run, tmp_path,
-                                                                         capsys):
+def test_a_linked_train_info_is_refused_not_read_nor_written_through(run, tmp_path,
+                                                                      capsys):
     target = _outside(tmp_path, "train_info.json", run / "train_info.json")
     before = target.read_text()
     (run / "train_info.json").unlink()
     (run / "train_info.json").symlink_to(target)
-    assert _resume(run) == 0  # the earlier wall time is lost, said, and the run goes on
+    assert _resume(run) == 2  # refused before the first write (check_run_files)
     assert f"{run / 'train_info.json'} leads outside {run}" in _err(capsys)
     assert target.read_text() == before
-    assert not (run / "train_info.json").is_symlink()
+    assert (run / "train_info.json").is_symlink()  # left as it was
 
 
 def test_a_linked_command_txt_is_not_rewritten_nor_exported(run, tmp_path, capsys):
