@@ -933,7 +933,10 @@ def run_folders() -> list[Input]:
     # A saved model that does not load (not a zip, statistics not an npz or not finite) is
     # skipped with a warning and the run resumes from the newest one that loads: resume's
     # documented answer to a file truncated by a kill (agents/training/resume.py).
-    skipped_with_warning = {"final.garbage", "vecnorm.garbage", "vecnorm.nan", "eval.garbage"}
+    skipped_with_warning = {"vecnorm.garbage", "vecnorm.nan", "eval.garbage"}
+    # final_model.zip that is not a zip has no step count: it sorts after every checkpoint,
+    # and the newest checkpoint loads, so it is never read.
+    maybe_unread.add("final.garbage")
     for i, d, m in resume_cases:
         out.append(_run_input(f"resume.{i}", "run_resume", RESUME, f"--resume: {d}", m,
                               check=_secret_intact,
@@ -1033,9 +1036,13 @@ def run_folders() -> list[Input]:
 
     ev = [*ETINY]
     run_eval = [
-        ("final_agent.link_out", "RUN/final_agent -> another agent folder",
+        # A run folder's best agent (at its top) is the one evaluated: final_agent/ is
+        # not read then; without a top agent it is, and a link out must be refused.
+        ("final_agent.link_out", "RUN/final_agent -> another agent folder (top agent kept)",
          [*EVAL, "{tmp}/run", *ev], lambda run, tmp, fix: fx.replace_with_link(
-             run / "final_agent", (fix / "run_sac/final_agent").resolve()), "invalid"),
+             run / "final_agent", (fix / "run_sac/final_agent").resolve()), "any"),
+        ("final_agent.link_out_read", "RUN/final_agent -> another agent folder, no top agent",
+         [*EVAL, "{tmp}/run", *ev], _final_agent_read_out, "invalid"),
         ("agent_json.link_out", "RUN/agent.json -> outside copy", [*EVAL, "{tmp}/run", *ev],
          outside_copy("agent.json"), "any"),
         ("seed_link", "FOLDER/seed_0 -> a run folder", [*EVAL, "{tmp}/seeds", *ev], seed_link,
@@ -1063,6 +1070,12 @@ def run_folders() -> list[Input]:
     for i, d, argv, m, e in run_eval:
         out.append(_run_input(f"runeval.{i}", "run_evaluate", argv, d, m, expect=e))
     return out
+
+
+def _final_agent_read_out(run: Path, tmp: Path, fix: Path) -> None:
+    for name in ("agent.json", "policy.safetensors"):
+        (run / name).unlink()
+    fx.replace_with_link(run / "final_agent", (fix / "run_sac/final_agent").resolve())
 
 
 def _final_agent_out(run: Path, tmp: Path, fix: Path) -> None:
