@@ -211,13 +211,15 @@ def test_nominal_model_is_checked_before_any_work(nominal, error, match, no_buil
 
 
 def test_a_bad_nominal_model_in_a_suite_file_is_refused_before_any_episode(tmp_path, no_build):
-    """Through the user's command: a YAML suite whose nominal masses are <= 0."""
+    """Through the user's command: a YAML suite whose nominal masses are <= 0 (checked
+    when the suite file is read, before any policy is built)."""
     from tether_gym_agents.evaluation.benchmark import evaluate
 
     suite = tmp_path / "bad.yml"
     suite.write_text("scenarios:\n  - name: bad\n    env_kwargs: {}\n"
                      "    nominal: {masses: [0.0, 2.0]}\n")
-    with pytest.raises(ValueError, match=r"policy 'mpc' on scenario 'bad': nominal masses"):
+    with pytest.raises(ValueError, match=r"bad.yml, scenario 0 \(bad\): nominal masses=\(0.0, 2.0\) "
+                                         r"must all be > 0"):
         evaluate(["mpc"], suite=str(suite), n_seeds=1, out=None, log=None)
 
 
