@@ -298,9 +298,12 @@ def load_agent(path):
         obs_space = space_from_json(meta["observation_space"],
                                     f"{meta_path}: observation_space")
         act_space = space_from_json(meta["action_space"], f"{meta_path}: action_space")
-        kwargs = settings_from_json(meta["policy_kwargs"])
     except PolicyJsonError as exc:
         raise AgentLoadError(str(exc)) from None
+    try:
+        kwargs = settings_from_json(meta["policy_kwargs"])
+    except PolicyJsonError as exc:  # its messages name the key, not the file
+        raise AgentLoadError(f"{meta_path}: {exc}") from None
     row = ALGORITHMS[meta["algo"]]
     cls_name = row.policy
     try:

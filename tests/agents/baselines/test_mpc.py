@@ -218,8 +218,8 @@ def test_a_bad_nominal_model_in_a_suite_file_is_refused_before_any_episode(tmp_p
     suite = tmp_path / "bad.yml"
     suite.write_text("scenarios:\n  - name: bad\n    env_kwargs: {}\n"
                      "    nominal: {masses: [0.0, 2.0]}\n")
-    with pytest.raises(ValueError, match=r"bad.yml, scenario 0 \(bad\): nominal masses=\(0.0, 2.0\) "
-                                         r"must all be > 0"):
+    with pytest.raises(ValueError, match=r"bad.yml, scenario 0 \(bad\): nominal "
+                                         r"masses=\(0.0, 2.0\) must all be > 0"):
         evaluate(["mpc"], suite=str(suite), n_seeds=1, out=None, log=None)
 
 

@@ -193,3 +193,21 @@ def test_values_in_bounds_still_load(unit, tmp_path):
         meta["observation_space"]["high"] = ["inf"] * n
     agent = TrainedAgent.load(_edited(unit, tmp_path, meta_edit=edit))
     assert np.isfinite(agent.predict(np.zeros(agent.observation_space.shape))[0]).all()
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ("abc", r"policy_kwargs must be a mapping, got 'abc'"),
+    ({"activation_fn": "os.system"}, r"activation_fn 'os.system' is not one of"),
+])
+def test_bad_policy_kwargs_name_the_agent_file(unit, tmp_path, capsys, kwargs, match):
+    """Before: the sweep's agent.activation.code / agent.type.policy_kwargs were refused
+    without naming agent.json; now the file leads the one line."""
+    def edit(meta):
+        meta["policy_kwargs"] = kwargs
+
+    run = _edited(unit, tmp_path, meta_edit=edit)
+    with pytest.raises(AgentLoadError, match=re.escape(str(run / AGENT_FILE)) + ": " + match):
+        TrainedAgent.load(run)
+    assert evaluate_main([str(run), "--suite", "paper", "--seeds", "1", "--no-plots",
+                          "--out", str(tmp_path / "ev")]) == 2
+    assert f"{run / AGENT_FILE}: " in capsys.readouterr().err
