@@ -21,6 +21,7 @@ from __future__ import annotations
 import functools
 import os
 import stat
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +78,17 @@ def _loader_class():
     return LimitedSafeLoader
 
 
+def _with_constructors(constructors: Mapping[str, Callable] | None):
+    """The limited loader class, or a subclass of it that also builds ``constructors``."""
+    base = _loader_class()
+    if not constructors:
+        return base
+    cls: Any = type("ExtendedSafeLoader", (base,), {})
+    for tag, constructor in constructors.items():
+        cls.add_constructor(tag, constructor)  # PyYAML copies the table for the subclass
+    return cls
+
+
 def _describe(exc) -> str:
     """One line from a yaml.YAMLError: the problem and its line number (1-based)."""
     if hasattr(exc, "character") and hasattr(exc, "position"):  # yaml.reader.ReaderError
@@ -96,7 +108,8 @@ def _describe(exc) -> str:
     return text
 
 
-def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES) -> Any:
+def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES,
+                   constructors: Mapping[str, Callable] | None = None) -> Any:
     """The document of YAML ``text``, read safely (no code run, no aliases, bounded depth).
 
     Parameters
@@ -107,6 +120,10 @@ def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES) -
         What the text is, for the messages (e.g. ``"suite file runs/x.yml"``).
     max_bytes : int
         Longest text accepted [bytes of its UTF-8 encoding].
+    constructors : mapping of str to callable, optional
+        Extra tags and their PyYAML constructors (``constructor(loader, node)``), for a
+        format with tags of its own that build plain data (rl_zoo3's ``OrderedDict``);
+        the limits above hold for them too.
 
     Returns
     -------
@@ -131,7 +148,7 @@ def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES) -
         raise YamlFileError(f"{source}: reading YAML needs PyYAML: {YAML_PIP}") from None
     try:
         # the reader refuses characters YAML does not allow (NUL bytes...) while built
-        loader = _loader_class()(text)
+        loader = _with_constructors(constructors)(text)
     except yaml.YAMLError as exc:
         raise YamlFileError(f"{source}: not valid YAML: {_describe(exc)}") from None
     try:
@@ -144,7 +161,8 @@ def load_yaml_text(text: str, *, source: str, max_bytes: int = MAX_YAML_BYTES) -
         loader.dispose()
 
 
-def load_yaml_file(path, *, what: str = "YAML file", max_bytes: int = MAX_YAML_BYTES) -> Any:
+def load_yaml_file(path, *, what: str = "YAML file", max_bytes: int = MAX_YAML_BYTES,
+                   constructors: Mapping[str, Callable] | None = None) -> Any:
     """The document of the YAML file ``path``, read safely.
 
     The file must be a regular file (a link to one is followed) of at most ``max_bytes``,
@@ -159,6 +177,8 @@ def load_yaml_file(path, *, what: str = "YAML file", max_bytes: int = MAX_YAML_B
         What the file is, for the messages (e.g. ``"suite file"``, ``"--sweep file"``).
     max_bytes : int
         Largest file accepted [bytes] (default :data:`MAX_YAML_BYTES`).
+    constructors : mapping of str to callable, optional
+        Extra tags, as :func:`load_yaml_text` takes them.
 
     Returns
     -------
@@ -202,7 +222,7 @@ def load_yaml_file(path, *, what: str = "YAML file", max_bytes: int = MAX_YAML_B
     except UnicodeDecodeError as exc:
         raise YamlFileError(f"{source}: not UTF-8 text (byte {exc.start} is "
                             f"{data[exc.start:exc.start + 1]!r}); is it a YAML file?") from None
-    return load_yaml_text(text, source=source, max_bytes=max_bytes)
+    return load_yaml_text(text, source=source, max_bytes=max_bytes, constructors=constructors)
 
 
 def _check_regular(info: os.stat_result, source: str, max_bytes: int) -> None:

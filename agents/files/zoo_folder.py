@@ -30,7 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..common.yamlio import MAX_YAML_BYTES
+from ..common.yamlio import MAX_YAML_BYTES, YamlFileError, load_yaml_file
 from .folder_paths import FolderFileError, file_inside
 
 __all__ = ["ZOO_CONFIG_FILE", "ZOO_ARGS_FILE", "ZOO_STATS_FILE", "ZOO_BEST_MODEL_FILE",
@@ -117,6 +117,9 @@ def find_zoo_run(path) -> ZooRun | None:
 def read_zoo_yaml(path: Path) -> dict:
     """A YAML file the zoo wrote (an ``OrderedDict`` dump) as a dict; no code is run.
 
+    Read with :func:`~tether_gym_agents.common.yamlio.load_yaml_file` (its size, alias and
+    depth limits) and the zoo's two tags (``OrderedDict``, ``tuple``) as plain data.
+
     Raises
     ------
     ZooFolderError
@@ -127,19 +130,6 @@ def read_zoo_yaml(path: Path) -> dict:
     """
     import yaml
 
-    class _ZooLoader(yaml.SafeLoader):
-        """SafeLoader with the zoo's two tags; anchors and aliases refused.
-
-        As in :mod:`tether_gym_agents.common.yamlio`: an alias bomb expands without end.
-        """
-
-        def compose_node(self, parent, index):
-            event = self.peek_event()
-            if isinstance(event, yaml.AliasEvent) or getattr(event, "anchor", None):
-                raise yaml.composer.ComposerError(None, None, "YAML anchors and aliases are "
-                                                  "not accepted", event.start_mark)
-            return super().compose_node(parent, index)
-
     def ordered_dict(loader, node):
         args = loader.construct_sequence(node, deep=True)
         pairs = args[0] if len(args) == 1 and isinstance(args[0], list) else None
@@ -148,19 +138,19 @@ def read_zoo_yaml(path: Path) -> dict:
                                                     "a list of key-value pairs", node.start_mark)
         return {k: v for k, v in pairs}
 
-    _ZooLoader.add_constructor(_ORDERED_DICT_TAG, ordered_dict)
-    _ZooLoader.add_constructor(_TUPLE_TAG,
-                               lambda loader, node: tuple(loader.construct_sequence(node)))
+    def as_tuple(loader, node):
+        return tuple(loader.construct_sequence(node))
+
     try:
         file_inside(Path(path).parent, path, max_bytes=MAX_YAML_BYTES)
     except FolderFileError as exc:
         raise ZooFolderError(str(exc)) from None
     try:
-        data = yaml.load(path.read_text(), Loader=_ZooLoader)  # noqa: S506 - safe subclass
-    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError) as exc:
-        message = " ".join(str(exc).split())  # one line (PyYAML's marks span three)
+        data = load_yaml_file(path, what="rl_zoo3 file", constructors={
+            _ORDERED_DICT_TAG: ordered_dict, _TUPLE_TAG: as_tuple})
+    except YamlFileError as exc:
         raise ZooFolderError(f"{path} cannot be read as rl_zoo3's YAML (plain data and "
-                             f"OrderedDict only): {message}") from None
+                             f"OrderedDict only): {exc}") from None
     if not isinstance(data, dict):
         raise ZooFolderError(f"{path} is not a mapping (got {type(data).__name__})")
     return data
