@@ -27,7 +27,7 @@ from tether_gym_agents.files.safe_format import AGENT_FILE, AgentLoadError
 from tether_gym_agents.files.trained import TrainedAgent
 from tether_gym_agents.training.checkpoint import load_stats_npz
 
-ENV = "tether_gym/TetherLibration-v1"
+ENV = "tether_gym/TetherLibration-v2"
 TINY = ["--timesteps", "64", "--n-envs", "1", "--no-progress", "--eval-episodes", "1",
         "--eval-freq", "64"]
 

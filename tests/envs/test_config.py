@@ -201,7 +201,8 @@ OUT_OF_RANGE = {
     "orbits_per_episode": 0.0, "init_theta_range": -1.0, "init_dtheta_range": -1.0,
     "init_length_range": -1.0, "obs_noise": -1.0, "obs_bias": 0.7, "disturbance": -1.0,
     "eccentricity_range": (0.5, 0.1), "mass_range": 1.0, "observe_params": "masses",
-    "reward_weights": {"effort": -1.0}, "render_mode": "x",
+    "reward_weights": {"effort": -1.0}, "cost_thresholds": {"tumble_fraction": 1.5},
+    "render_mode": "x",
 }
 
 
@@ -221,6 +222,6 @@ def test_a_bad_value_of_any_argument_names_the_argument_and_the_value(name, kind
     # (gymnasium adds the kwargs to a TypeError: the message must name the value without it)
     message = str(err.value).split(" was raised from the environment creator")[0]
     assert message.startswith(name), message
-    shown = repr(value["effort"]) if isinstance(value, dict) else repr(value)
+    shown = repr(next(iter(value.values()))) if isinstance(value, dict) else repr(value)
     assert shown in message, message
     assert any(word in message for word in ("must", "valid range", "not one of")), message

@@ -87,7 +87,7 @@ def test_a_reset_never_returns_a_failed_state(kwargs):
         assert all(f is None for f in info["failure"])
 
 
-# tether_gym/TetherLibration-v1 with starts that fail often: 7 angles at 1.55 +- 0.1 rad,
+# tether_gym/TetherLibration-v2 with starts that fail often: 7 angles at 1.55 +- 0.1 rad,
 # each below pi/2 in 60 % of the draws (issue 24's configuration)
 OFTEN_FAILED = {"n_bodies": 8, "initial_theta": (1.55,) * 7, "init_theta_range": 0.1,
                 "orbits_per_episode": 0.05, "action_mode": "rate"}

@@ -191,7 +191,7 @@ def test_missing_matplotlib(monkeypatch):
     hint = r'pip install -e "\.\[plot\]"'
     with pytest.raises(DependencyNotInstalled, match=hint):
         module.ChainRenderer(EnvConfig.from_kwargs(), "rgb_array")
-    env = gym.make("tether_gym/TetherLibration-v1", render_mode="rgb_array")
+    env = gym.make("tether_gym/TetherLibration-v2", render_mode="rgb_array")
     env.reset(seed=0)
     with pytest.raises(DependencyNotInstalled, match=hint):
         env.render()

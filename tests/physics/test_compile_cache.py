@@ -31,7 +31,7 @@ PACKAGE = os.path.dirname(os.path.abspath(tether_gym.__file__))
 # one trajectory of the single env through gym.make, printed as JSON
 TRAJECTORY = """
 import json, gymnasium as gym, numpy as np, tether_gym
-env = gym.make("tether_gym/TetherLibration-v1")
+env = gym.make("tether_gym/TetherLibration-v2")
 obs, _ = env.reset(seed=3)
 for k in range(5):
     obs, *_ = env.step(np.full(env.action_space.shape, 0.5 - 0.2 * k, dtype=np.float32))

@@ -27,6 +27,7 @@ import numpy as np
 from ..physics.dispatch import Direct
 from ..physics.kernels import Substeps
 from ..physics.state import STATE
+from ..tasks.cost import COST_NAMES
 from ..tasks.reference import (
     desired_libration,
     expand_like,
@@ -127,7 +128,8 @@ def step_config(config: EnvConfig) -> StepConfig:
         with_eccentricity=observed["eccentricity"],
         with_masses=observed["masses"],
         reward=config.reward_weights.record(),
-        length_nominal=np.asarray(config.chain.initial_lengths, dtype=float))
+        length_nominal=np.asarray(config.chain.initial_lengths, dtype=float),
+        cost=config.cost_thresholds.record((lo, hi)))
 
 
 def _stop_workers(workers: list[SpinWorker]) -> None:
@@ -296,6 +298,7 @@ class ChainBatch:
             disturbance=np.zeros((num, n)), noise=np.tile(self._bias, (num, 1)),
             obs=np.zeros((num, config.obs_dim), dtype=np.float32),
             reward=np.zeros(num), components=np.zeros((num, len(COMPONENTS))),
+            cost=np.zeros((num, len(COST_NAMES))),
             failure=np.zeros(num, dtype=np.int64),
             tension_min=np.zeros((num, n)), tension=np.zeros((num, n)),
             derivative=np.zeros((num, m)),
@@ -524,6 +527,7 @@ class ChainBatch:
         r.failure[rows] = 0
         r.reward[rows] = 0.0
         r.components[rows] = 0.0
+        r.cost[rows] = 0.0
         self._step(rows, self._no_action, r, self.cfg, self._work[0], True, self._once)
 
     # ------------------------------------------------------------------ #

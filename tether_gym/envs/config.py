@@ -29,6 +29,7 @@ from ..params import (
     renamed_error,
 )
 from ..physics import Scales, TetherChain
+from ..tasks.cost import CostThresholds
 from ..tasks.reward import RewardWeights
 from .actions import INCREMENT, RATE
 from .layout import OBSERVATION
@@ -276,13 +277,14 @@ class EnvConfig:
     episode: Episode = field(default_factory=Episode)
     randomisation: Randomisation = field(default_factory=Randomisation)
     reward_weights: RewardWeights = field(default_factory=RewardWeights)
+    cost_thresholds: CostThresholds = field(default_factory=CostThresholds)
     render_mode: str | None = None
 
     # ------------------------------------------------------------------ #
     @classmethod
     def names(cls) -> list[str]:
         """The flat keyword names, in the Arguments table's order."""
-        return ["n_bodies", *FLAT_NAMES, "reward_weights", "render_mode"]
+        return ["n_bodies", *FLAT_NAMES, "reward_weights", "cost_thresholds", "render_mode"]
 
     @classmethod
     def from_kwargs(cls, **kwargs: Any) -> EnvConfig:
@@ -327,6 +329,7 @@ class EnvConfig:
                                           if attr != flat}) from None
         config = cls(n_bodies=int(n_bodies), **parts,
                      reward_weights=RewardWeights.from_dict(kwargs.get("reward_weights")),
+                     cost_thresholds=CostThresholds.from_dict(kwargs.get("cost_thresholds")),
                      render_mode=kwargs.get("render_mode"))
         return config
 
@@ -345,6 +348,11 @@ class EnvConfig:
         if not all(lo < l0 < hi for l0 in lengths):
             raise ValueError(f"initial_lengths={lengths!r} must lie inside "
                              f"length_bounds={(lo, hi)!r}")
+        factor = self.cost_thresholds.length_factor
+        if lo * factor >= hi / factor:
+            raise ValueError(f"cost_thresholds['length_factor']={factor!r} leaves no cost-free "
+                             f"length inside length_bounds={(lo, hi)!r}: it must be < "
+                             f"sqrt(l_max / l_min) = {(hi / lo) ** 0.5:g}")
         check_range("init_length_range", self.randomisation.init_length_range, 0.0,
                     min(lengths), high_open=True)
         if self.reels.time_constant < 0.5 * self.episode.physics_step:

@@ -20,6 +20,7 @@ import operator
 import numpy as np
 
 from ..physics.layout import Field, Layout
+from ..tasks.cost import COST_PARTS
 from ..tasks.reward import COMPONENTS, MARGINS, PENALTIES
 from ..tasks.termination import Failure
 
@@ -53,6 +54,12 @@ _COMPONENT_DOCS = {"reward_tracking": "(1 - W) r_track, the tracking part of the
                    **{f"reward_{name}": "reward penalty (<= 0)" for name in PENALTIES},
                    **{f"reward_{name}": "reward margin term (>= 0)" for name in MARGINS}}
 
+_COST_DOCS = {"cost": "constraint cost, cost_slack + cost_length + cost_tumble (v2)",
+              "cost_slack": "1 if a tension fell below T_c during the step, else 0",
+              "cost_length": "1 if a length is within a factor f of a length bound, else 0",
+              "cost_tumble": "1 if a libration reached g pi/2, else 0"}
+assert set(_COST_DOCS) == {"cost", *(f"cost_{part}" for part in COST_PARTS)}
+
 INFO = Layout("info", (
     Field("nu", False, "[rad]", "true anomaly (not wrapped)"),
     Field("theta", True, "[rad]", "libration angles"),
@@ -69,7 +76,8 @@ INFO = Layout("info", (
     Field("eccentricity", False, "[-]", "e of the episode"),
     Field("failure", False, "[-]", "None, or why the episode terminated"),
 ) + tuple(Field(name, False, "[-]", _COMPONENT_DOCS[name])
-          for name in COMPONENTS))
+          for name in COMPONENTS)
+  + tuple(Field(name, False, "[-]", doc) for name, doc in _COST_DOCS.items()))
 I = INFO.index  # noqa: E741 - the info layout's index, beside O
 """Buffer index of each info entry: ``scalars[I.nu[0]]``, ``vectors[I.theta[1]]``."""
 

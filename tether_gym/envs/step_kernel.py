@@ -25,6 +25,7 @@ from ..physics.jit import INLINE, LOOP
 from ..physics.layout import at
 from ..physics.orbit import reel_accel
 from ..physics.state import P, S, mass_fraction
+from ..tasks.cost import CostParams, cost_terms
 from ..tasks.reference import desired_libration_jit
 from ..tasks.reward import TERMS, RewardParams, reward_terms, term_sums
 from ..tasks.termination import KEEP_PREVIOUS, failure_code
@@ -55,6 +56,7 @@ class StepConfig(NamedTuple):
     with_masses: bool             # the mass fractions M_i follow it
     reward: RewardParams
     length_nominal: np.ndarray    # (n,) l_i,nom [-] of the length term and observation
+    cost: CostParams              # thresholds of the constraint cost (tasks.cost)
 
 
 class Rows(NamedTuple):
@@ -68,6 +70,7 @@ class Rows(NamedTuple):
     obs: np.ndarray          # (B, obs_dim) float32 observations (OBSERVATION layout)
     reward: np.ndarray       # (B,)
     components: np.ndarray   # (B, 1 + len(TERMS))
+    cost: np.ndarray         # (B, len(COST_NAMES)) the cost and its parts
     failure: np.ndarray      # (B,) int64 Failure codes
     tension_min: np.ndarray  # (B, n)
     tension: np.ndarray      # (B, n) T^ at the end of the step
@@ -159,6 +162,8 @@ def write_outputs(b, rows, cfg, anomaly):
     s[I.failure[0], b] = rows.failure[b]
     for c in range(rows.components.shape[1]):
         s[I.reward_tracking[0] + c, b] = rows.components[b, c]
+    for c in range(rows.cost.shape[1]):
+        s[I.cost[0] + c, b] = rows.cost[b, c]
     v = rows.info_v
     k = 1.0 + ecc * cn
     der = rows.derivative[b]
@@ -178,7 +183,12 @@ def write_outputs(b, rows, cfg, anomaly):
 
 @njit(**INLINE)
 def _task(b, cfg, work, rows, anomaly):
-    """Failure code, reward and its components of row b after its step."""
+    """Failure code, reward, its components and the cost of row b after its step.
+
+    The cost is computed after a non-finite or diverged step has been replaced by the
+    last healthy state, from the tensions set to 0 there: such a step costs
+    ``cost_slack`` = 1 at least.
+    """
     y = rows.y[b]
     n = y.shape[0] // 4
     par = rows.par[b] if rows.par.shape[0] > 1 else rows.par[0]
@@ -199,7 +209,9 @@ def _task(b, cfg, work, rows, anomaly):
         for i in range(y.shape[0]):
             if not math.isfinite(rows.derivative[b, i]):
                 rows.derivative[b, i] = 0.0
+        cost_terms(y, n, rows.tension_min[b], cfg.cost, rows.cost[b])
         return
+    cost_terms(y, n, rows.tension_min[b], cfg.cost, rows.cost[b])
     sn, cn, ref, dref = anomaly
     ecc = par[at(P.eccentricity, n)]
     k = 1.0 + ecc * cn

@@ -1,4 +1,4 @@
-"""The Gymnasium environment ``tether_gym/TetherLibration-v1``."""
+"""The Gymnasium environment ``tether_gym/TetherLibration-v2``."""
 
 from __future__ import annotations
 
@@ -130,6 +130,23 @@ class TetherLibrationEnv(gym.Env):
     ``reward_length`` (in [0, w]). docs/task_design.md gives the reasons and the
     ablation behind each choice.
 
+    ## Cost
+
+    For safe reinforcement learning (Safety-Gymnasium's convention; docs/safe_rl.md),
+    every step's ``info["cost"]`` counts the constraints the chain came near, each an
+    indicator in {{0, 1}} (thresholds of ``cost_thresholds``, defaults in brackets):
+
+        cost = cost_slack + cost_length + cost_tumble  in {{0, 1, 2, 3}}
+        cost_slack  = 1 if min_i T^_i,min < T_c                    [tension T_c = 0.5]
+        cost_length = 1 if any l_i < f l_min or l_i > l_max / f    [length_factor f = 1.25]
+        cost_tumble = 1 if any |theta_i| >= g pi/2                 [tumble_fraction g = 0.5]
+
+    with (l_min, l_max) = ``length_bounds``. The step that terminates an episode costs
+    at least 1; the reset costs 0. The reward does not depend on the cost.
+    ``tether_gym.tasks.cost.COST_LIMIT`` (0.01) is the benchmark's limit on an
+    episode's mean cost per step. ``tether_gym.safety_gymnasium`` wraps the env to
+    Safety-Gymnasium's 6-tuple step.
+
     ## Starting State
 
     nu = ``initial_nu`` (0); theta = ``initial_theta`` (0.1, 0, ..., 0) + U(+-
@@ -169,7 +186,7 @@ class TetherLibrationEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("tether_gym/TetherLibration-v1", **kwargs)``; unknown names raise
+    ``gym.make("tether_gym/TetherLibration-v2", **kwargs)``; unknown names raise
     ValueError with the list of valid ones.
 
     | Argument             | Default        | Meaning                                         |
@@ -205,6 +222,7 @@ class TetherLibrationEnv(gym.Env):
     | mass_range           | None           | relative half-width to draw each mass           |
     | observe_params       | None           | True: e, M_i in the obs; "eccentricity": e      |
     | reward_weights       | None           | dict overriding RewardWeights fields            |
+    | cost_thresholds      | None           | dict overriding CostThresholds fields (Cost)    |
     | render_mode          | None           | None, "rgb_array" or "human"                    |
 
     ## Info
@@ -216,6 +234,12 @@ class TetherLibrationEnv(gym.Env):
 
     ## Version History
 
+    * v2 (tether_gym 0.7.0): a constraint-cost signal for safe reinforcement learning.
+      ``info`` adds ``cost``, ``cost_slack``, ``cost_length`` and ``cost_tumble`` (the
+      Cost section) and ``gym.make`` the argument ``cost_thresholds``. Observations,
+      actions, rewards, terminations, starting states and trajectories are v1's,
+      bitwise, so agents trained on v1 run on v2 unchanged. v1 stays registered and
+      returns exactly what it returned (no cost entries; ``cost_thresholds`` is refused).
     * v1 (tether_gym 0.3.0): a task that rewards what the benchmark measures
       (docs/task_design.md has the ablation over training seeds behind each change).
       Actions are increments of the reel-rate command by default

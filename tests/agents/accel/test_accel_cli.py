@@ -37,7 +37,7 @@ def test_train_gpu_on_cpu_writes_runs_that_evaluate_scores(tmp_path, capsys):
     assert res
 
 
-BLOCK = "tether_gym/TetherLibration-v1:\n  "
+BLOCK = "tether_gym/TetherLibration-v2:\n  "
 
 
 @pytest.mark.parametrize("text, message", [

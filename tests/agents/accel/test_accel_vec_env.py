@@ -19,7 +19,7 @@ TRAINING = {"increment_gain": 0.5, "initial_theta": [0.0, 0.0], "init_theta_rang
 
 
 def _native(kwargs, seed=3):
-    venv = gym.make_vec("tether_gym/TetherLibration-v1", num_envs=B,
+    venv = gym.make_vec("tether_gym/TetherLibration-v2", num_envs=B,
                         vectorization_mode="vector_entry_point", parallel=False, **kwargs)
     obs, _ = venv.reset(seed=seed)
     return venv, obs

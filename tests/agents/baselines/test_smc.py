@@ -117,8 +117,8 @@ def test_observed_eccentricity_alone_is_used_with_the_model_masses():
     """With observe_params="eccentricity" the law takes e from the observation and the
     masses from its model: on a fixed e equal to the model's it acts as with no params."""
     kwargs = {"action_mode": "rate", "eccentricity_range": (0.2, 0.2)}
-    seeing = gym.make("tether_gym/TetherLibration-v1", observe_params="eccentricity", **kwargs)
-    blind = gym.make("tether_gym/TetherLibration-v1", observe_params=False, **kwargs)
+    seeing = gym.make("tether_gym/TetherLibration-v2", observe_params="eccentricity", **kwargs)
+    blind = gym.make("tether_gym/TetherLibration-v2", observe_params=False, **kwargs)
     obs_s, _ = seeing.reset(seed=0)
     obs_b, _ = blind.reset(seed=0)
     smc_s = SlidingModeController.for_env(seeing)

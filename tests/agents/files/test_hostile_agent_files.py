@@ -182,7 +182,7 @@ BAD_VALUES = {
                              r"net_arch names \['qf'\]; allowed for PPO: \['pi', 'vf'\]"),
     "env id": (("env", "id"), "Pendulum-v1",
                r"env.id='Pendulum-v1' is not a tether_gym env; allowed: "
-               r"\['tether_gym/TetherLibration-v1'\] or null"),
+               r"\['tether_gym/TetherLibration-v1', 'tether_gym/TetherLibration-v2'\] or null"),
     "env kwargs": (("env", "kwargs"), "n_bodies=4", r"env.kwargs='n_bodies=4'"),
     "space shape": (("observation_space", "shape"), [10 ** 9],
                     r"observation_space.shape=\[1000000000\] has 1000000000 entries"),

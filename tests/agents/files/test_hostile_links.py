@@ -287,7 +287,7 @@ def test_evaluate_allow_pickle_refuses_an_alias_bomb_in_config_yml(run, tmp_path
 
 
 def test_convert_refuses_an_alias_bomb_in_a_zoo_config(base_run, tmp_path, capsys):
-    name = "tether_gym-TetherLibration-v1"
+    name = "tether_gym-TetherLibration-v2"
     zoo = tmp_path / "logs" / "ppo" / f"{name}_1"
     (zoo / name).mkdir(parents=True)
     shutil.copy(base_run / "final_model.zip", zoo / f"{name}.zip")

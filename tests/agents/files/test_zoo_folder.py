@@ -1,6 +1,6 @@
 """rl-baselines3-zoo run folders (issue 24): converted and evaluated like train.py's.
 
-Before: ``evaluate.py logs/ppo/tether_gym-TetherLibration-v1_1 --allow-pickle`` said
+Before: ``evaluate.py logs/ppo/tether_gym-TetherLibration-v2_1 --allow-pickle`` said
 "no agent.json" and ``python -m tether_gym_agents.files convert`` found no model.
 """
 

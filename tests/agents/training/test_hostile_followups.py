@@ -11,7 +11,7 @@ import pytest
 
 from tether_gym_agents.cli.train import main
 
-ENV = "tether_gym/TetherLibration-v1"
+ENV = "tether_gym/TetherLibration-v2"
 
 
 @pytest.fixture

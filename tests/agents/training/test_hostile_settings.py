@@ -18,7 +18,7 @@ from tether_gym_agents.cli.train import main
 from tether_gym_agents.common.algorithms import ALGORITHMS
 from tether_gym_agents.training.hyperparams import _CHECKS, _POLICY_KWARGS
 
-ENV = "tether_gym/TetherLibration-v1"
+ENV = "tether_gym/TetherLibration-v2"
 
 HOSTILE = {  # case: (algo, YAML lines under the env id, expected message after the file)
     "n_envs 1e9": ("ppo", "n_envs: 1000000000",

@@ -97,7 +97,7 @@ def test_shipped_configs_and_sb3_forms_pass(algo):
     from tether_gym_agents.training.config import CONFIG_DIR, load_hyperparams
 
     for path in CONFIG_DIR.glob(f"{algo}*.yml"):
-        load_hyperparams(path, algo, "tether_gym/TetherLibration-v1")
+        load_hyperparams(path, algo, "tether_gym/TetherLibration-v2")
     good = {"learning_rate": "lin_3e-4", "gamma": 1, "use_sde": False, "sde_sample_freq": -1,
             "policy_kwargs": {"net_arch": [64, 64], "activation_fn": "nn.Tanh",
                               "log_std_init": -2.0, "optimizer_kwargs": {"eps": 1e-5},

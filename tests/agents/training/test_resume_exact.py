@@ -26,7 +26,7 @@ FAST = ["--algo", "sac", "--n-envs", str(N_ENVS), "--no-progress", "--eval-episo
 @pytest.fixture
 def sac_run(tmp_path):
     config = tmp_path / "sac.yml"
-    config.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
+    config.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v2": {
         "learning_starts": 64, "buffer_size": 2048, "batch_size": 32,
         "policy_kwargs": {"net_arch": [16, 16]}}}))
     out = tmp_path / "run"

@@ -46,7 +46,7 @@ def _poison_zip(path, marker):
 
 def _sac_config(tmp_path):
     path = tmp_path / "sac.yml"
-    path.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
+    path.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v2": {
         "learning_starts": 64, "buffer_size": 2048, "batch_size": 32,
         "policy_kwargs": {"net_arch": [16, 16]}}}))
     return path

@@ -93,15 +93,15 @@ def test_unknown_config_key_rejected(tmp_path):
     path = tmp_path / "bad.yml"
     path.write_text("default:\n  n_steps: 64\n  learning_rat: 0.001\n")
     with pytest.raises(ConfigError, match=r"learning_rat.*valid keys"):
-        load_hyperparams(path, "ppo", "tether_gym/TetherLibration-v1")
+        load_hyperparams(path, "ppo", "tether_gym/TetherLibration-v2")
     assert main(["--config", str(path), "--out", str(tmp_path / "o"), "--timesteps", "8"]) == 2
 
 
 def test_env_id_block_overrides_default(tmp_path):
     path = tmp_path / "c.yml"
     path.write_text("default: {n_steps: 64, gamma: 0.9}\n"
-                    "tether_gym/TetherLibration-v1: {gamma: 0.5}\n")
-    params = load_hyperparams(path, "ppo", "tether_gym/TetherLibration-v1")
+                    "tether_gym/TetherLibration-v2: {gamma: 0.5}\n")
+    params = load_hyperparams(path, "ppo", "tether_gym/TetherLibration-v2")
     assert params == {"n_steps": 64, "gamma": 0.5}
 
 
@@ -132,7 +132,7 @@ def test_env_kwargs_parsed_safely():
 
 def test_unknown_env_id_suggests(tmp_path, capsys):
     assert main(["--env-id", "tether_gym/TetherLibraton-v0", "--out", str(tmp_path)]) == 2
-    assert "did you mean 'tether_gym/TetherLibration-v1'" in capsys.readouterr().err
+    assert "did you mean 'tether_gym/TetherLibration-v2'" in capsys.readouterr().err
 
 
 def test_bad_env_kwarg_is_reported(tmp_path, capsys):

@@ -88,7 +88,7 @@ def test_user_env_kwargs_reach_the_run(tmp_path, capsys):
 
 def test_nonuniform_config_list_error_names_the_line(tmp_path, capsys):
     cfg = tmp_path / "c.yml"
-    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
+    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v2": {
         "env_kwargs": {"masses": [1.0, 2.0]}}}))
     assert main(["--config", str(cfg), "--out", str(tmp_path / "o"), "--timesteps", "8",
                  "--env-kwargs", "n_bodies=4"]) == 2
@@ -101,7 +101,7 @@ def test_linear_schedules_in_zoo_notation(tmp_path, capsys):
     assert schedule["gamma"] == 0.9
     assert [schedule["learning_rate"](p) for p in (1.0, 0.5, 0.0)] == [3e-4, 1.5e-4, 0.0]
     cfg = tmp_path / "c.yml"
-    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {
+    cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v2": {
         "learning_rate": "lin_1e-3", "clip_range": "lin_0.2", "n_steps": 32,
         "batch_size": 32}}))
     out = tmp_path / "o"
@@ -110,7 +110,7 @@ def test_linear_schedules_in_zoo_notation(tmp_path, capsys):
     saved = yaml.safe_load((out / "config.yml").read_text())["hyperparams"]
     assert saved["learning_rate"] == "lin_1e-3"  # recorded as written
     for bad in ("lin_0", "lin_x", "const_1e-3"):
-        cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v1": {"learning_rate": bad}}))
+        cfg.write_text(yaml.safe_dump({"tether_gym/TetherLibration-v2": {"learning_rate": bad}}))
         assert main(["--config", str(cfg), "--out", str(tmp_path / "b"), "--timesteps",
                      "8"]) == 2
         err = capsys.readouterr().err

@@ -72,8 +72,8 @@ def test_rl_zoo3_trains_with_the_shipped_config(tmp_path, algo):
     env = {**os.environ, "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
-    run = tmp_path / algo / "tether_gym-TetherLibration-v1_1"
-    assert (run / "tether_gym-TetherLibration-v1.zip").is_file()
+    run = tmp_path / algo / "tether_gym-TetherLibration-v2_1"
+    assert (run / "tether_gym-TetherLibration-v2.zip").is_file()
     # zoo printed the hyperparameters it read: the file's env kwargs and normalisation
     assert "Using 'default' hyperparameters" not in proc.stdout
     assert "'eccentricity_range': [0.0, 0.35]" in proc.stdout
