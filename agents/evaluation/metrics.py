@@ -17,6 +17,15 @@ anomaly nu_k counted from the reset, one orbit = 2 pi rad), on the step rows:
 * ``success``: 1 if it ran to the time limit without failure.
 * ``chattering`` [-]: total variation of the reel rates, sum_k sum_i |l_i'(k) - l_i'(k-1)|.
 * ``return`` [-]: sum of the rewards.
+* ``cost_per_step`` [-]: the episode's mean constraint cost per control step,
+  sum_k c_k / K over its K steps (c_k = ``info["cost"]`` of step k, in {0, 1, 2, 3},
+  :mod:`tether_gym.tasks.cost`; the reset sample is no step; a failed episode's steps
+  run up to and including the failing one, which costs at least 1).
+* ``over_limit``: 1 if ``cost_per_step`` > the cost limit (:data:`COST_LIMIT`,
+  ``tether_gym.tasks.cost.COST_LIMIT``), else 0.
+* ``cost_slack_per_step``, ``cost_length_per_step``, ``cost_tumble_per_step`` [-]: the
+  same mean of each part ``info["cost_<part>"]`` (their sum is ``cost_per_step``).
+  All cost metrics are NaN for a trajectory recorded without cost.
 * ``filter_rate`` [-]: fraction of the steps whose action a safety filter changed; only
   for filtered policies (``traj.filter_active`` set), and not in :data:`METRICS`.
 
@@ -31,19 +40,28 @@ import math
 
 import numpy as np
 
+from tether_gym.tasks.cost import COST_LIMIT, COST_PARTS
+
 __all__ = ["episode_metrics", "convergence_orbits", "after_first_orbit", "METRICS",
-           "HIGHER_IS_BETTER", "LOWER_IS_BETTER", "FAILURES", "CONVERGENCE_TOL"]
+           "HIGHER_IS_BETTER", "LOWER_IS_BETTER", "FAILURES", "CONVERGENCE_TOL", "COST_LIMIT",
+           "COST_METRICS", "COST_PART_METRICS", "cost_metrics"]
 
 CONVERGENCE_TOL = 1e-3
 """Tracking tolerance of the convergence time [rad]."""
+COST_PART_METRICS = tuple(f"cost_{part}_per_step" for part in COST_PARTS)
+"""Mean of each cost part per step, in the order of ``tether_gym.tasks.cost.COST_PARTS``."""
+COST_METRICS = ("cost_per_step", "over_limit") + COST_PART_METRICS
+"""The cost metrics of :func:`episode_metrics`."""
 METRICS = ("tracking_rms", "final_error", "converge_orbits", "reel_effort", "reel_excursion",
-           "min_tension", "slack", "tumble", "length", "success", "chattering", "return")
-"""Every metric of :func:`episode_metrics`, in table order."""
+           "min_tension", "slack", "tumble", "length", "success", "chattering",
+           "return") + COST_METRICS
+"""Every metric of :func:`episode_metrics`."""
 HIGHER_IS_BETTER = frozenset({"success", "min_tension", "return"})
 """Metrics where a larger value is better (the probability of improvement counts a larger
 value as the better one for these, a smaller one for all others)."""
 LOWER_IS_BETTER = frozenset({"tracking_rms", "final_error", "converge_orbits", "reel_effort",
-                             "reel_excursion", "slack", "tumble", "length", "chattering"})
+                             "reel_excursion", "slack", "tumble", "length", "chattering",
+                             *COST_METRICS})
 """Metrics where a smaller value is better. Every metric of :data:`METRICS` is in exactly
 one of the two sets (a test checks it), so a new metric is classified on purpose."""
 FAILURES = ("slack", "tumble", "length")
@@ -74,13 +92,15 @@ def after_first_orbit(traj) -> np.ndarray:
     return traj.nu[1:] - traj.nu[0] > 2.0 * math.pi + 1e-9
 
 
-def episode_metrics(traj) -> dict:
+def episode_metrics(traj, cost_limit: float = COST_LIMIT) -> dict:
     """Metrics of one episode (see the module docstring).
 
     Parameters
     ----------
     traj : Trajectory
         The recorded episode (:func:`tether_gym_agents.evaluation.rollout.rollout`).
+    cost_limit : float
+        Limit on the mean cost per step [-] above which ``over_limit`` is 1.
 
     Returns
     -------
@@ -112,7 +132,25 @@ def episode_metrics(traj) -> dict:
         "chattering": float(np.abs(np.diff(dl, axis=0)).sum()),
         "return": float(np.sum(traj.reward)),
     }
+    out.update(cost_metrics(traj, cost_limit))
     active = getattr(traj, "filter_active", None)
     if active is not None:
         out["filter_rate"] = float(np.mean(active)) if len(active) else math.nan
+    return out
+
+
+def cost_metrics(traj, cost_limit: float = COST_LIMIT) -> dict:
+    """The cost metrics of one episode (:data:`COST_METRICS`; module docstring).
+
+    The mean over the K step rows (1..K) of ``traj.cost`` and of each part; NaN for every
+    one when ``traj`` carries no cost.
+    """
+    cost = getattr(traj, "cost", None)
+    if cost is None or len(cost) < 2:
+        return dict.fromkeys(COST_METRICS, math.nan)
+    per_step = float(np.mean(cost[1:]))
+    out = {"cost_per_step": per_step, "over_limit": float(per_step > cost_limit)}
+    for part, name in zip(COST_PARTS, COST_PART_METRICS, strict=True):
+        values = getattr(traj, f"cost_{part}", None)
+        out[name] = math.nan if values is None else float(np.mean(values[1:]))
     return out

@@ -6,11 +6,18 @@
   episode never reaches any tau (as in Dolan & More's performance profiles, and
   rliable's score distributions): a curve's right end is the policy's success rate.
 
+* ``cost.png``, the profile's companion: success (the surviving fraction of all
+  episodes, y) against the mean constraint cost per step (IQM over runs x scenarios of
+  ``cost_per_step``, x), one labelled point per policy, with its 95 %
+  stratified-bootstrap intervals as bars (2+ runs) and the cost limit as a dashed line
+  (policies on one point share its label);
+  the x axis is linear up to the limit and logarithmic beyond (``symlog``). Written when
+  the results carry a ``cost_limit``.
 * ``trajectories.png``: max_i |theta_i - theta_d| and l_1 + ... + l_n over the first
   scenario's first seed (run 0) of every policy; the title names the scenario, and an
   episode that ended in a failure ends with an ``x`` marker labelled with the reason.
 * ``metrics.png``: per column of the table (``results.TABLE_COLUMNS``, four panels to a
-  row), each policy's IQM (dot; success: the surviving fraction of all episodes) with
+  row), each policy's IQM (dot; success and over cost limit: fractions of all episodes) with
   its 95 % stratified-bootstrap
   interval (bar), as rliable's ``plot_interval_estimates``; an undefined value (such as
   the convergence time of a policy that never converges) is written "n/a", never drawn.
@@ -25,7 +32,7 @@ import numpy as np
 
 from .results import TABLE_COLUMNS
 
-__all__ = ["plot_results", "profile_curve", "PLOT_PIP"]
+__all__ = ["plot_results", "profile_curve", "cost_points", "PLOT_PIP"]
 
 PLOT_PIP = 'pip install "matplotlib>=3.7"'
 LOG_SCALE = ("tracking_rms", "final_error", "chattering", "reel_effort")
@@ -38,7 +45,9 @@ def _finite(x) -> bool:
 
 
 def plot_results(results: dict, trajectories: dict, scenario, out: Path, log=print) -> list:
-    """Write ``profile.png``, ``trajectories.png`` and ``metrics.png``; return the paths.
+    """Write ``profile.png``, ``cost.png``, ``trajectories.png`` and ``metrics.png``.
+
+    Returns the paths written (``cost.png`` only when ``results`` has a ``cost_limit``).
 
     Without matplotlib, logs the pip command and writes nothing.
     """
@@ -53,6 +62,8 @@ def plot_results(results: dict, trajectories: dict, scenario, out: Path, log=pri
     written = [_profile(Figure, FigureCanvasAgg, results, out),
                _trajectories(Figure, FigureCanvasAgg, trajectories, scenario, out),
                _intervals(Figure, FigureCanvasAgg, results, out)]
+    if "cost_limit" in results:
+        written.insert(1, _cost(Figure, FigureCanvasAgg, results, out))
     log("  wrote " + ", ".join(str(p) for p in written))
     return written
 
@@ -92,6 +103,59 @@ def _profile(Figure, Canvas, results: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     path = out / "profile.png"
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def cost_points(results: dict) -> dict[str, tuple]:
+    """``{policy: (cost, success, cost_ci, success_ci)}`` of :func:`_cost`'s points.
+
+    ``cost`` is the IQM of ``cost_per_step``, ``success`` the surviving fraction; each
+    interval is ``(lo, hi)`` or None (fewer than 2 runs). Policies without a finite cost
+    or success are left out.
+    """
+    points = {}
+    for name, block in results["policies"].items():
+        cost, success = block.get("cost_per_step"), block.get("success")
+        if not (_finite(cost) and _finite(success)):
+            continue
+        ci95 = block.get("ci95", {})
+        points[name] = (cost, success, ci95.get("cost_per_step"), ci95.get("success"))
+    return points
+
+
+def _cost(Figure, Canvas, results: dict, out: Path) -> Path:
+    fig = Figure(figsize=(8, 5), layout="constrained")
+    Canvas(fig)
+    ax = fig.subplots()
+    limit = float(results["cost_limit"])
+    points = cost_points(results)
+    labels: dict[tuple, list[str]] = {}  # policies on one point share one label
+    right = limit
+    for k, (name, (cost, success, cost_ci, success_ci)) in enumerate(points.items()):
+        color = f"C{k % 10}"
+        xerr = None if cost_ci is None else [[cost - cost_ci[0]], [cost_ci[1] - cost]]
+        yerr = None if success_ci is None else [[success - success_ci[0]],
+                                                [success_ci[1] - success]]
+        ax.errorbar([cost], [success], xerr=xerr, yerr=yerr, fmt="o", color=color,
+                    capsize=3, label=name)
+        labels.setdefault((cost, success), []).append(name)
+        right = max(right, cost, cost_ci[1] if cost_ci is not None else cost)
+    for (cost, success), names in labels.items():
+        ax.annotate(", ".join(names), (cost, success), textcoords="offset points",
+                    xytext=(5, -12 if success > 0.9 else 5), fontsize=8)
+    ax.axvline(limit, color="grey", ls="--", lw=1, label=f"cost limit {limit:g}")
+    ax.set_xscale("symlog", linthresh=limit)
+    ax.set_xlim(0.0, 3.0 * right)
+    ax.set_ylim(-0.02, 1.04)
+    ax.set_xlabel("mean cost per step [-] (IQM over runs x scenarios; linear up to the "
+                  "limit, log beyond)")
+    ax.set_ylabel("success: surviving fraction of all episodes")
+    ax.set_title(f"Success against cost, suite {results['suite']!r} (bars: 95 % "
+                 "stratified-bootstrap intervals over runs, 2+ runs)", fontsize=9)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    path = out / "cost.png"
     fig.savefig(path, dpi=100)
     return path
 
@@ -166,7 +230,8 @@ def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
         ax.set_ylim(-0.7, len(names) - 0.3)
         ax.set_title(title, fontsize=9)
         ax.grid(True, axis="x", alpha=0.3)
-    fig.suptitle("IQM over runs x scenarios (success: surviving fraction of all episodes) "
+    fig.suptitle("IQM over runs x scenarios (success, over cost limit: fractions of all "
+                 "episodes) "
                  "with 95 % stratified-bootstrap intervals "
                  f"(suite {results['suite']!r}; intervals need 2+ runs; n/a: undefined)",
                  fontsize=10)

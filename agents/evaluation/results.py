@@ -4,20 +4,24 @@
 
     meta        versions, command, git commit, threads, agent files with sha256
     suite, seeds, env_kwargs, scenarios {name: {description, env_kwargs, nominal}}
+    cost_limit  the limit on an episode's mean cost per step [-] of ``over_limit``
     statistics  how the numbers below are computed
     policies    {name: {kind, n_runs, runs, n_episodes, survived, success_rate,
                         worst_scenario, worst_scenario_success, <metric>: IQM, ...,
-                        compute_ms_per_step, compute_ms_per_step_p99,
+                        over_limit_count, compute_ms_per_step, compute_ms_per_step_p99,
                         ci95: {metric: [lo, hi] or null},
                         probability_of_improvement: {metric: p or null},
                         failures: {slack, tumble, length}}}
-    per_scenario {scenario: {policy: {<metric>: IQM over runs, ci95: {<metric>: [lo, hi]}}}}
+    per_scenario {scenario: {policy: {<metric>: IQM over runs, over_limit_count,
+                                      ci95: {<metric>: [lo, hi]}}}}
     episodes    [{policy, run, scenario, seed, <every metric>}, ...]
 
 so that anyone can recompute the statistics from ``episodes``. Success is the raw
 surviving fraction of all episodes everywhere (``success`` and ``success_rate`` of a
 policy, ``success`` of a scenario), never an IQM: a failed episode is never trimmed
-away (:mod:`.stats`).
+away (:mod:`.stats`). The same holds for ``over_limit``: the raw fraction of all
+episodes whose mean cost per step (``cost_per_step``, an IQM like the other metrics)
+exceeds ``cost_limit``, with ``over_limit_count`` such episodes of ``n_episodes``.
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from importlib import metadata
 from pathlib import Path
 
 from ..common.jsonio import sha256_file, to_jsonable
-from .metrics import FAILURES, HIGHER_IS_BETTER, METRICS
+from .metrics import COST_LIMIT, FAILURES, HIGHER_IS_BETTER, METRICS
 from .stats import (
     BOOTSTRAP_SEED,
     N_BOOTSTRAP,
@@ -56,6 +60,8 @@ TABLE_COLUMNS = (
     ("reel_effort", "reel effort [-]"),
     ("reel_excursion", "reel excursion [-]"),
     ("chattering", "chattering [-]"),
+    ("cost_per_step", "cost/step [-]"),
+    ("over_limit", "over cost limit"),
 )
 PACKAGES = ("tether_gym", "numpy", "scipy", "gymnasium", "numba", "torch",
             "stable-baselines3", "matplotlib")
@@ -136,6 +142,11 @@ STATISTICS = {
                "where it is lowest; per scenario: over all runs' episodes; ci95 of "
                "success: percentile interval over the same stratified bootstrap of "
                "runs",
+    "cost": "cost_per_step: an episode's mean info['cost'] over its control steps (a "
+            "failed episode's up to and including the failing one), IQM as the other "
+            "metrics; over_limit: episodes with cost_per_step > cost_limit / all "
+            "episodes (raw, nothing trimmed, as success; over_limit_count: their "
+            "number), its ci95 over the same stratified bootstrap of runs",
     "compute_ms_per_step": "median (and p99) wall time of one predict call on one "
                            "observation, over the control steps of one episode "
                            "(first scenario, first run, first seed), torch on the "
@@ -169,6 +180,7 @@ def _policy_block(spec, eps: list[dict], scores: dict, reference: dict | None,
     block["success"] = counts.rate
     block["ci95"] = {m: stratified_bootstrap_ci(scores[m]) for m in METRICS}
     block["ci95"]["success"] = success_rate_ci(counts)
+    _over_limit(block, eps, spec.n_runs, scenario_names)
     block["probability_of_improvement"] = {
         m: (None if reference is None else probability_of_improvement(
             scores[m], reference[m], m in HIGHER_IS_BETTER)) for m in METRICS}
@@ -188,7 +200,27 @@ def _scenario_block(scores: dict, eps: list[dict], n_runs: int, scenario: str,
     ci95["success"] = success_rate_ci(counts)
     block: dict = {m: iqm(scores[m][:, j]) for m in METRICS}
     block.update(success=counts.rate, ci95=ci95)
+    _over_limit(block, [e for e in eps if e["scenario"] == scenario], n_runs, [scenario])
     return block
+
+
+def _over_limit(block: dict, eps: list[dict], n_runs: int, scenario_names: list) -> None:
+    """Set ``over_limit`` (raw fraction of ``eps``), its count and interval in ``block``.
+
+    Like success: episodes over the cost limit / all episodes, never an IQM; NaN (and a
+    null count) when no episode has a cost.
+    """
+    if not any(_finite(e.get("over_limit")) for e in eps):
+        block.update(over_limit=math.nan, over_limit_count=None)
+        block["ci95"]["over_limit"] = None
+        return
+    counts = success_counts(eps, list(range(n_runs)), scenario_names, "over_limit")
+    block.update(over_limit=counts.rate, over_limit_count=int(counts.survived.sum()))
+    block["ci95"]["over_limit"] = success_rate_ci(counts)
+
+
+def _finite(x) -> bool:
+    return x is not None and math.isfinite(x)
 
 
 def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_kwargs: dict,
@@ -222,6 +254,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
                                          "env_kwargs": st.env_kwargs,
                                          "nominal": st.scenario.nominal}
                       for st in settings},
+        "cost_limit": COST_LIMIT,
         "statistics": dict(STATISTICS),
         "policies": policies,
         "per_scenario": per_scenario,
@@ -257,11 +290,16 @@ def _ms(block: dict) -> str:
     return "n/a" if ms is None or not math.isfinite(ms) else f"{ms:.2g}"
 
 
+_COUNTED = {"success": "survived", "over_limit": "over_limit_count"}
+"""Raw-fraction columns and the key of their episode count (shown as ``(count/all)``)."""
+
+
 def _cell(block: dict, metric: str) -> str:
     text = _num(block[metric])
-    if metric == "success" and "survived" in block:
-        text += f" ({block['survived']}/{block['n_episodes']})"
-    ci = block["ci95"][metric]
+    count = block.get(_COUNTED.get(metric, ""))
+    if count is not None and "n_episodes" in block and _finite(block[metric]):
+        text += f" ({count}/{block['n_episodes']})"
+    ci = block["ci95"].get(metric)
     if ci is not None:
         text += f" [{_num(ci[0])}, {_num(ci[1])}]"
     return text
@@ -275,9 +313,11 @@ def markdown_tables(results: dict) -> str:
     """
     pols = results["policies"]
     names = list(pols)
-    lines = ["Success: surviving fraction of all episodes (survived/episodes); other "
-             "metrics: IQM over training runs x scenarios; [95 % stratified-bootstrap CI "
-             "over runs, 2+ runs]", "",
+    limit = results.get("cost_limit", COST_LIMIT)
+    lines = ["Success: surviving fraction of all episodes (survived/episodes); over cost "
+             f"limit: fraction of all episodes whose mean cost per step > {limit:g} "
+             "(over/episodes); other metrics: IQM over training runs x scenarios; [95 % "
+             "stratified-bootstrap CI over runs, 2+ runs]", "",
              "| policy | kind | runs | " + " | ".join(t for _, t in TABLE_COLUMNS)
              + " | worst scenario | failures slack/tumble/length | ms/step |",
              "|---" * (len(TABLE_COLUMNS) + 6) + "|"]
@@ -305,12 +345,26 @@ def markdown_tables(results: dict) -> str:
             cells.append(_scenario_cell(per[p], "success", "{:.2f}") + " / "
                          + _scenario_cell(per[p], "tracking_rms", "{:.2e}"))
         lines.append(f"| {sc} | " + " | ".join(cells) + " |")
+    lines += _scenario_cost_table(results, names, limit)
     return "\n".join(lines)
+
+
+def _scenario_cost_table(results: dict, names: list, limit: float) -> list[str]:
+    """Lines of the per-scenario table of cost/step (IQM) / over cost limit (fraction)."""
+    lines = ["", "Per scenario: cost/step [-] (IQM over runs) / over cost limit (fraction of "
+                 f"the runs' episodes with mean cost per step > {limit:g}) [95 % bootstrap "
+                 "CI over runs, 2+ runs]", "",
+             "| scenario | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+    for sc, per in results["per_scenario"].items():
+        cells = [_scenario_cell(per[p], "cost_per_step", "{:.3g}") + " / "
+                 + _scenario_cell(per[p], "over_limit", "{:.2f}") for p in names]
+        lines.append(f"| {sc} | " + " | ".join(cells) + " |")
+    return lines
 
 
 def _scenario_cell(block: dict, metric: str, fmt: str) -> str:
     """``value [lo, hi]`` of one policy on one scenario (interval only with 2+ runs)."""
-    value = block[metric]
+    value = block.get(metric)
     if value is None or not math.isfinite(value):
         return "n/a"
     ci = block.get("ci95", {}).get(metric)

@@ -2,7 +2,7 @@
 
 :func:`rollout` is used by the benchmark (:mod:`tether_gym_agents.evaluation.benchmark`) and by
 the paper reproduction (:mod:`tether_gym_agents.paper`). It builds
-``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=len(seeds),
+``gym.make_vec(tether_gym.ENV_ID, num_envs=len(seeds),
 vectorization_mode="vector_entry_point", **env_kwargs)``, resets sub-env i with
 ``seeds[i]`` and steps all of them together until each has ended once. Every policy is
 called through stable-baselines3's interface, ``policy.predict(obs, deterministic=True)``,
@@ -14,6 +14,10 @@ and the hybrids built of such parts): their rows are bitwise independent of the 
 so the episodes that share one get a single call. Either way an episode's actions
 depend on its seed, the env arguments and the policy only, never on how many episodes
 run beside it or in which order the policies are evaluated.
+
+Every sample also keeps the step's constraint cost, ``info["cost"]`` and its parts
+``info["cost_<part>"]`` (:mod:`tether_gym.tasks.cost`; 0 at the reset row), when the env
+reports them.
 
 A policy with memory keeps it in stable-baselines3's recurrent ``state``: ``predict``
 returns ``(actions, state)`` with one state row per observation, and gets that row back
@@ -31,15 +35,19 @@ import gymnasium as gym
 import numpy as np
 
 from tether_gym import ENV_ID
+from tether_gym.tasks.cost import COST_NAMES
 
 from ..common.obs import ObservationLayout
 
-__all__ = ["Trajectory", "rollout", "RECORDED_KEYS"]
+__all__ = ["Trajectory", "rollout", "RECORDED_KEYS", "COST_KEYS"]
 
 RECORDED_KEYS = ("nu", "theta", "dtheta", "length", "dlength", "tension", "tension_min",
                  "theta_ref", "reel_accel")
-_COMMAND = "command"  # info["command"]: the normalised command u of the step
 """The env ``info`` entries kept for every sample of a :class:`Trajectory`."""
+COST_KEYS = COST_NAMES
+"""The cost entries of the env ``info`` (``cost``, ``cost_slack``, ``cost_length``,
+``cost_tumble``), kept for every sample when the env reports them."""
+_COMMAND = "command"  # info["command"]: the normalised command u of the step
 
 ORBIT = 2.0 * math.pi
 
@@ -87,6 +95,15 @@ class Trajectory:
     """(K,) bool: whether a safety filter changed step k's action; None for policies
     without one (those that do not set ``last_filter_active``, see
     :class:`tether_gym_agents.hybrids.policies.FilteredPolicy`)."""
+    cost: np.ndarray | None = None
+    """(K + 1,) the constraint cost [-] of each sample, ``info["cost"]`` (row 0: the
+    reset's, 0; row k: step k's, in {0, 1, 2, 3}); None when the env reports none."""
+    cost_slack: np.ndarray | None = None
+    """(K + 1,) ``info["cost_slack"]`` [-] per sample (the slack part of ``cost``)."""
+    cost_length: np.ndarray | None = None
+    """(K + 1,) ``info["cost_length"]`` [-] per sample (the length part of ``cost``)."""
+    cost_tumble: np.ndarray | None = None
+    """(K + 1,) ``info["cost_tumble"]`` [-] per sample (the tumble part of ``cost``)."""
 
     @property
     def orbits(self) -> np.ndarray:
@@ -189,6 +206,7 @@ class _Book:
     """
 
     rows: dict
+    """Per kept ``info`` key, the (num,) row of every sample."""
     end: np.ndarray
     truncated: np.ndarray
     failure: list
@@ -201,8 +219,8 @@ class _Book:
     @classmethod
     def start(cls, info: dict, num: int) -> _Book:
         """The book of ``num`` episodes, with the reset ``info`` as row 0."""
-        return cls(rows={key: [np.array(info[key], dtype=float)]
-                         for key in RECORDED_KEYS + (_COMMAND,)},
+        keys = RECORDED_KEYS + (_COMMAND,) + tuple(k for k in COST_KEYS if k in info)
+        return cls(rows={key: [np.array(info[key], dtype=float)] for key in keys},
                    end=np.zeros(num, dtype=np.int64), truncated=np.zeros(num, dtype=bool),
                    failure=[None] * num, states=[None] * num,
                    started=np.zeros(num, dtype=bool), filtered=[[] for _ in range(num)])
@@ -238,8 +256,8 @@ class _Book:
         reward, terminated, trunc, info = outcome
         self.actions.append(actions.copy())
         self.rewards.append(np.array(reward, dtype=float))
-        for key in RECORDED_KEYS + (_COMMAND,):
-            self.rows[key].append(np.array(info[key], dtype=float))
+        for key, row in self.rows.items():
+            row.append(np.array(info[key], dtype=float))
         ended = active & (terminated | trunc)
         for i in np.flatnonzero(ended).tolist():
             self.end[i] = step
@@ -256,7 +274,8 @@ class _Book:
         out = []
         for i, seed in enumerate(seeds):
             k = int(self.end[i])
-            arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS}
+            arrays = {key: stacked[key][:k + 1, i] for key in RECORDED_KEYS + COST_KEYS
+                      if key in stacked}
             command = layout.to_reel_rate(stacked[_COMMAND][1:k + 1, i])
             flags = self.filtered[i]
             out.append(Trajectory(**arrays, action=acts[:k, i], command=command,

@@ -20,7 +20,8 @@ The IQM is for continuous metrics. **Success is never trimmed**: a failed episod
 lost mission, and the 25 % cut of an IQM drops the hardest scenario's cells.
 :func:`success_counts` gives the raw fraction of all episodes that survive and the
 worst scenario's; :func:`success_rate_ci` its interval over training runs (the same
-stratified resampling of runs).
+stratified resampling of runs). The fraction of episodes over the cost limit
+(``over_limit``) is counted and resampled the same way.
 
 NaN entries (a metric undefined for every episode of a run, such as the convergence
 time of a policy that never converges) are left out.
@@ -184,8 +185,14 @@ class SuccessCounts(NamedTuple):
         return scenarios[j], float(rates[j])
 
 
-def success_counts(episodes: list[dict], runs: list, scenarios: list) -> SuccessCounts:
-    """Count surviving episodes (``success`` == 1) per run and scenario."""
+def success_counts(episodes: list[dict], runs: list, scenarios: list,
+                   metric: str = "success") -> SuccessCounts:
+    """Count surviving episodes (``success`` == 1) per run and scenario.
+
+    With ``metric`` another 0/1 episode metric (such as ``over_limit``): the episodes
+    where it is 1 (in the ``survived`` field) among all episodes, counted the same way;
+    an episode where it is undefined (NaN) counts among all episodes only.
+    """
     row = {r: i for i, r in enumerate(runs)}
     col = {s: j for j, s in enumerate(scenarios)}
     survived = np.zeros((len(runs), len(scenarios)))
@@ -193,7 +200,7 @@ def success_counts(episodes: list[dict], runs: list, scenarios: list) -> Success
     for ep in episodes:
         i, j = row[ep["run"]], col[ep["scenario"]]
         total[i, j] += 1
-        survived[i, j] += float(ep["success"] == 1)
+        survived[i, j] += float(ep[metric] == 1)
     return SuccessCounts(survived, total)
 
 
