@@ -27,6 +27,7 @@ from typing import NamedTuple
 import torch
 
 from tether_gym.physics.state import PARAMS
+from tether_gym.tasks.cost import COST_PARTS, CostParams
 from tether_gym.tasks.reward import TERMS, RewardParams
 from tether_gym.tasks.termination import (
     DIVERGENCE_BOUND,
@@ -36,7 +37,11 @@ from tether_gym.tasks.termination import (
 )
 
 __all__ = ["ChainConsts", "StepResult", "TaskStep", "control_step", "rhs", "advance",
-           "reel_accel", "failure_code", "reward", "observation", "info_vectors", "TUMBLE_ANGLE"]
+           "reel_accel", "failure_code", "reward", "cost", "observation", "info_vectors",
+           "TUMBLE_ANGLE"]
+
+if COST_PARTS != ("slack", "length", "tumble"):  # a part added there and not in cost()
+    raise RuntimeError(f"the torch cost computes slack, length, tumble, not {COST_PARTS}")
 
 LENGTH_FLOOR = 1.0e-6
 """Smallest l [-] whose logarithm the observation takes (as the numba step)."""
@@ -64,6 +69,7 @@ class ChainConsts(NamedTuple):
     with_eccentricity: bool     # e closes the observation
     with_masses: bool           # the mass fractions follow it
     reward: RewardParams        # the reward's weights (tasks.reward)
+    cost: CostParams            # the constraint cost's thresholds (tasks.cost)
     length_nominal: torch.Tensor  # (n,) l_i,nom [-]
     mt_index: torch.Tensor      # (n, n) int64: max(j, k)
 
@@ -269,6 +275,7 @@ class TaskStep(NamedTuple):
     derivative: torch.Tensor
     reward: torch.Tensor
     components: torch.Tensor
+    cost: torch.Tensor         # (B, len(COST_NAMES)) the cost and its parts
     failure: torch.Tensor      # int64 Failure codes
     obs: torch.Tensor          # float32
 
@@ -277,9 +284,10 @@ def control_step(nu, y, u, action, disturbance, noise, par, cc: ChainConsts) -> 
     """One control step of every row (``step_kernel.step_rows`` with reset False).
 
     The action sets the command (``envs.actions.next_command``), the chain advances
-    (:func:`advance`), the failure code, reward and observation follow
+    (:func:`advance`), the failure code, reward, cost and observation follow
     (``step_kernel._task``, ``write_outputs``); a non-finite or diverged step keeps the
-    previous state with reward 0 and its non-finite tensions and derivative zeroed.
+    previous state with reward 0 and its non-finite tensions and derivative zeroed, and
+    its cost is computed from those (a zeroed tension costs ``cost_slack`` = 1).
     A pure function of tensors: ``torch.compile`` can fuse it.
     """
     n = cc.n
@@ -307,8 +315,9 @@ def control_step(nu, y, u, action, disturbance, noise, par, cc: ChainConsts) -> 
     rew, comps = reward(y, u, accel, tension_min, ref, dref, cc)
     rew = torch.where(keep, torch.zeros_like(rew), rew)
     comps = torch.where(kc, torch.zeros_like(comps), comps)
+    costs = cost(y, tension_min, cc)
     obs = observation(nu, y, noise, par, u, cc)
-    return TaskStep(nu, y, u, tension, tension_min, derivative, rew, comps, code, obs)
+    return TaskStep(nu, y, u, tension, tension_min, derivative, rew, comps, costs, code, obs)
 
 
 def failure_code(y, tension_min, cc: ChainConsts) -> torch.Tensor:
@@ -364,6 +373,22 @@ def reward(y, u, accel_ratio, tension_min, ref, dref, cc: ChainConsts):
         parts.append(part)
         total = total + part
     return total, torch.stack(parts, dim=1)
+
+
+def cost(y, tension_min, cc: ChainConsts) -> torch.Tensor:
+    """The cost and its parts (B, len(COST_NAMES)), in COST_NAMES' order (``cost_terms``).
+
+    Each part is 1.0 where any tether of the row is near its bound, else 0.0; the
+    comparisons are ``tasks.cost.cost_terms``' own, negated, so a NaN costs as it does
+    there.
+    """
+    p = cc.cost
+    th, _, ln, _ = _split(y, cc.n)
+    slack = (~(tension_min >= p.tension)).any(dim=1)
+    length = (~((ln >= p.length_low) & (ln <= p.length_high))).any(dim=1)
+    tumble = (~(th.abs() < p.tumble)).any(dim=1)
+    parts = [flag.to(y.dtype) for flag in (slack, length, tumble)]
+    return torch.stack([parts[0] + parts[1] + parts[2], *parts], dim=1)
 
 
 def _sum_along(x: torch.Tensor) -> torch.Tensor:

@@ -1,6 +1,6 @@
 """``TorchTetherVecEnv``: thousands of libration envs stepped as torch tensors, on any device.
 
-The batched twin of ``gym.make_vec("tether_gym/TetherLibration-v1", num_envs=B)`` for
+The batched twin of ``gym.make_vec("tether_gym/TetherLibration-v2", num_envs=B)`` for
 learners that live on an accelerator: the state, the parameters, the observations and
 every per-step quantity stay on ``device`` (a CUDA GPU, or the CPU), so a rollout needs
 no host round trip per step. The step is :mod:`tether_gym_agents.accel.chain`, a
@@ -20,6 +20,7 @@ from tether_gym.envs.config import EnvConfig
 from tether_gym.envs.layout import INFO_KEYS
 from tether_gym.envs.tether_libration import action_space, observation_space
 from tether_gym.physics.state import PARAMS, STATE
+from tether_gym.tasks.cost import COST_NAMES
 from tether_gym.tasks.reward import COMPONENTS
 from tether_gym.tasks.termination import TUMBLE_ANGLE, Failure
 
@@ -71,18 +72,18 @@ def chain_consts(config: EnvConfig, device, dtype=torch.float64) -> chain.ChainC
         amplitude=cfg.amplitude, frequency=cfg.frequency, length_min=cfg.length_min,
         length_max=cfg.length_max, accel_ref=cfg.accel_ref, accel_scale=cfg.accel_scale,
         with_eccentricity=cfg.with_eccentricity, with_masses=cfg.with_masses,
-        reward=cfg.reward,
+        reward=cfg.reward, cost=cfg.cost,
         length_nominal=torch.as_tensor(cfg.length_nominal, dtype=dtype, device=device),
         mt_index=torch.as_tensor(idx, dtype=torch.int64, device=device))
 
 
 class TorchTetherVecEnv:
-    r"""``num_envs`` libration environments of ``TetherLibration-v1`` as torch tensors.
+    r"""``num_envs`` libration environments of ``TetherLibration-v2`` as torch tensors.
 
     ## Description
 
     The task, physics, reward, termination, observation and ``info`` of
-    ``tether_gym/TetherLibration-v1`` (its docstring is the spec; every keyword argument
+    ``tether_gym/TetherLibration-v2`` (its docstring is the spec; every keyword argument
     of ``gym.make`` is accepted here), for a batch of chains held on one torch device.
     ``device="cuda"`` steps them on the GPU, ``device="cpu"`` on the CPU through the
     same code. The state is float64 by default (``dtype``), as in the numba env; the
@@ -108,7 +109,10 @@ class TorchTetherVecEnv:
     terminated/truncated (num_envs,) bool. ``info``: a dict of tensors with every key
     of the single env's ``info`` (floats (num_envs,), per-tether entries
     (num_envs, N-1)); ``"failure"`` holds the :class:`~tether_gym.tasks.termination.Failure`
-    codes (int64, 0 while healthy) instead of their labels.
+    codes (int64, 0 while healthy) instead of their labels. The constraint cost
+    ``"cost"`` and its parts ``"cost_slack"``, ``"cost_length"``, ``"cost_tumble"``
+    (num_envs,) are v2's (:mod:`tether_gym.tasks.cost`, thresholds from
+    ``cost_thresholds``), 0 at a reset.
 
     ``autoreset_mode="next_step"`` (default, gymnasium's and the native vector env's):
     the step after an episode ended ignores that sub-env's action, resets it and
@@ -205,6 +209,7 @@ class TorchTetherVecEnv:
         self.derivative = z(num, m)
         self.reward = z(num)
         self.components = z(num, len(COMPONENTS))
+        self.cost = z(num, len(COST_NAMES))     # the cost and its parts (COST_NAMES)
         self.failure = torch.zeros(num, dtype=torch.int64, device=self.device)
         self.steps = torch.zeros(num, dtype=torch.int64, device=self.device)
         self.nu_end = z(num)
@@ -344,6 +349,7 @@ class TorchTetherVecEnv:
         zero = torch.zeros_like(self.reward)
         self.reward = torch.where(rows, zero, self.reward)
         self.components = torch.where(col, torch.zeros_like(self.components), self.components)
+        self.cost = torch.where(col, torch.zeros_like(self.cost), self.cost)
         self.failure = torch.where(rows, torch.zeros_like(self.failure), self.failure)
         self.steps = torch.where(rows, torch.zeros_like(self.steps), self.steps)
 
@@ -423,7 +429,7 @@ class TorchTetherVecEnv:
         live = rows & ~self._start_failed
         out = self._control_step(self.nu, self.y, self.u, a, self.disturbance, self.noise,
                                  self.par)
-        nu, y, u, tension, tension_min, derivative, reward, comps, code, obs = out
+        nu, y, u, tension, tension_min, derivative, reward, comps, cost, code, obs = out
         lc = live[:, None]
         self.nu = torch.where(live, nu, self.nu)
         self.y = torch.where(lc, y, self.y)
@@ -433,6 +439,7 @@ class TorchTetherVecEnv:
         self.derivative = torch.where(lc, derivative, self.derivative)
         self.reward = torch.where(live, reward, self.reward)
         self.components = torch.where(lc, comps, self.components)
+        self.cost = torch.where(lc, cost, self.cost)  # a failed start's last step keeps 0
         self.failure = torch.where(live, code, self.failure)
         self.failure = torch.where(ended_start, self._start_code, self.failure)
         self.obs = torch.where(lc, obs, self.obs)
@@ -458,6 +465,8 @@ class TorchTetherVecEnv:
                   "failure": torch.where(self._start_failed, self._start_code, self.failure)}
         for c, name in enumerate(COMPONENTS):
             values[name] = self.components[:, c]
+        for c, name in enumerate(COST_NAMES):
+            values[name] = self.cost[:, c]
         return {key: values[key] for key in INFO_KEYS}
 
     def __repr__(self) -> str:
