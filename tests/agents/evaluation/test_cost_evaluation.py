@@ -19,13 +19,20 @@ from types import SimpleNamespace
 import gymnasium as gym
 import numpy as np
 import pytest
+from scipy.stats import trim_mean
 
 import tether_gym
 from tether_gym.tasks.cost import COST_LIMIT
 from tether_gym_agents.cli.evaluate import main
 from tether_gym_agents.evaluation import registry
 from tether_gym_agents.evaluation.results import build_results, markdown_tables
-from tether_gym_agents.evaluation.stats import run_scores, stratified_bootstrap_ci
+from tether_gym_agents.evaluation.stats import (
+    BOOTSTRAP_SEED,
+    N_BOOTSTRAP,
+    run_scores,
+    stratified_bootstrap_ci,
+)
+from tether_gym_agents.files.trained import pretrained_agents
 
 NAME = "cost_pulse_test"
 RATE = {"action_mode": "rate"}
@@ -224,3 +231,40 @@ def test_with_several_runs_cost_cells_get_the_intervals_of_the_other_metrics():
     assert row["cost/step [-]"] == (f"{_fmt(block['cost_per_step'])} "
                                     f"[{_fmt(lo)}, {_fmt(hi)}]")
     assert not math.isnan(block["cost_per_step"])
+
+
+@pytest.mark.skipif("ppo" not in pretrained_agents(), reason="no shipped PPO agent")
+def test_ten_shipped_runs_get_cost_intervals_over_runs(tmp_path):
+    """evaluate.py ppo on the robust suite: 10 training runs x 5 scenarios x 2 seeds."""
+    buffer = io.StringIO()
+    with contextlib.redirect_stdout(buffer):
+        code = main(["ppo", "--suite", "robust", "--seeds", "2", "--env-kwargs",
+                     "orbits_per_episode=0.5", "--out", str(tmp_path), "--no-plots"])
+    assert code == 0
+    res = json.loads((tmp_path / "results.json").read_text())
+    eps = res["episodes"]
+    block = res["policies"]["ppo"]
+    runs, scens = sorted({e["run"] for e in eps}), list(res["scenarios"])
+    assert len(runs) == 10 and len(eps) == 10 * len(scens) * 2
+    assert any(e["cost_per_step"] > 0 for e in eps)  # something to aggregate
+    # IQM of the (run, scenario) means, by hand
+    cells = np.array([[np.mean([e["cost_per_step"] for e in eps
+                                if e["run"] == r and e["scenario"] == s]) for s in scens]
+                      for r in runs])
+    assert block["cost_per_step"] == pytest.approx(trim_mean(cells.ravel(), 0.25), rel=1e-12)
+    assert block["ci95"]["cost_per_step"] == pytest.approx(stratified_bootstrap_ci(cells))
+    # over the limit: the raw fraction of all episodes, resampled over runs per scenario
+    over = np.array([[sum(e["over_limit"] for e in eps if e["run"] == r and e["scenario"] == s)
+                      for s in scens] for r in runs])
+    assert block["over_limit"] == over.sum() / len(eps)
+    assert block["over_limit_count"] == over.sum()
+    idx = np.random.default_rng(BOOTSTRAP_SEED).integers(0, 10, size=(N_BOOTSTRAP, 10,
+                                                                     len(scens)))
+    boot = over[idx, np.arange(len(scens))].sum(axis=(1, 2)) / len(eps)
+    assert block["ci95"]["over_limit"] == pytest.approx(list(np.percentile(boot, [2.5, 97.5])))
+    row = _row(buffer.getvalue(), "ppo")
+    lo, hi = block["ci95"]["cost_per_step"]
+    assert row["cost/step [-]"] == f"{_fmt(block['cost_per_step'])} [{_fmt(lo)}, {_fmt(hi)}]"
+    olo, ohi = block["ci95"]["over_limit"]
+    assert row["over cost limit"] == (f"{_fmt(block['over_limit'])} ({int(over.sum())}/{len(eps)})"
+                                      f" [{_fmt(olo)}, {_fmt(ohi)}]")
