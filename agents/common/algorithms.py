@@ -142,19 +142,30 @@ def _frozen(**items) -> Mapping:
 _CRITIC_BOUNDS = (1, 16)
 """Most Q networks: SB3 builds 2; REDQ-style ensembles use up to 10."""
 
+_PPO_POLICY = _POLICY_COMMON | {"ortho_init", "use_sde", "log_std_init", "full_std",
+                                "use_expln", "squash_output"}
+_PPO = frozenset({
+    "learning_rate", "n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda",
+    "clip_range", "clip_range_vf", "normalize_advantage", "ent_coef", "vf_coef",
+    "max_grad_norm", "use_sde", "sde_sample_freq", "rollout_buffer_class",
+    "rollout_buffer_kwargs", "target_kl", "stats_window_size", "policy_kwargs"})
+_LAGRANGE = frozenset({"cost_limit", "lagrange_lr", "lagrange_init"})
+"""PPOLagrangian's constraint settings (tether_gym_agents.training.lagrangian)."""
+
 ALGORITHMS: Mapping[str, Algorithm] = MappingProxyType({a.name: a for a in (
     Algorithm(
         name="ppo", model="stable_baselines3:PPO", library_model="stable_baselines3:PPO",
         on_policy=True, policy="ActorCriticPolicy",
         policy_module="stable_baselines3.common.policies", weights="policy",
         net_keys=("pi", "vf"),
-        policy_kwargs=_POLICY_COMMON | {"ortho_init", "use_sde", "log_std_init",
-                                        "full_std", "use_expln", "squash_output"},
-        hyperparams=frozenset({
-            "learning_rate", "n_steps", "batch_size", "n_epochs", "gamma", "gae_lambda",
-            "clip_range", "clip_range_vf", "normalize_advantage", "ent_coef", "vf_coef",
-            "max_grad_norm", "use_sde", "sde_sample_freq", "rollout_buffer_class",
-            "rollout_buffer_kwargs", "target_kl", "stats_window_size", "policy_kwargs"}),
+        policy_kwargs=_PPO_POLICY, hyperparams=_PPO,
+        critic="value", actor_outputs=1, copies=(1, 1)),
+    Algorithm(
+        name="ppo_lag", model="tether_gym_agents.training.lagrangian:PPOLagrangian",
+        library_model="tether_gym_agents.training.lagrangian:PPOLagrangian",
+        on_policy=True, policy="ActorCriticPolicy",
+        policy_module="stable_baselines3.common.policies", weights="policy",
+        net_keys=("pi", "vf"), policy_kwargs=_PPO_POLICY, hyperparams=_PPO | _LAGRANGE,
         critic="value", actor_outputs=1, copies=(1, 1)),
     Algorithm(
         name="sac", model="tether_gym_agents.training.caps:CapsSAC",

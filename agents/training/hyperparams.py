@@ -225,6 +225,10 @@ _CHECKS: dict[str, Any] = {
     "policy_delay": _int_at_least(1, MAX_UPDATES),
     "target_policy_noise": _number(0.0, MAX_NOISE),
     "target_noise_clip": _number(0.0, MAX_NOISE),
+    # PPOLagrangian's constraint (training/lagrangian.py): a limit on the mean cost per
+    # step (at most 3, the largest cost of a step), the multiplier's step and start
+    "cost_limit": _number(0.0, 3.0), "lagrange_lr": _number(0.0, MAX_LOSS_WEIGHT),
+    "lagrange_init": _number(0.0, MAX_LOSS_WEIGHT),
     # CapsSAC's/CapsTQC's smoothness weights and perturbation scale (training/caps.py)
     "caps_temporal": _number(0.0, MAX_LOSS_WEIGHT),
     "caps_spatial": _number(0.0, MAX_LOSS_WEIGHT),

@@ -325,6 +325,10 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
         For anything that would make the run fail or differ from what was asked; the
         run folder is made (and checked writable) only when everything else is valid.
     """
+    if options.algo == "ppo_lag" and options.env_id != tether_gym.ENV_ID:
+        raise ConfigError(f"--algo ppo_lag needs --env-id {tether_gym.ENV_ID} (its info holds "
+                          f"the constraint cost the algorithm learns from), got "
+                          f"{options.env_id!r}")
     out = Path(options.out) if options.out is not None else Path("runs") / options.algo
     params, source = _read_params(options, out)
     check_algo_params(params, options.algo, source)
