@@ -120,7 +120,10 @@ class TorchTetherVecEnv:
     ``"same_step"``: an ended sub-env is reset in the step that ended it; the step
     returns its reset observation, and ``info["final_obs"]`` (num_envs, obs_dim) and
     ``info["final_failure"]`` hold the last observation and the failure code of the
-    episode for the ended rows (stable-baselines3's ``terminal_observation``).
+    episode for the ended rows (stable-baselines3's ``terminal_observation``). The
+    returned reward and the cost entries of ``info`` are the step's, as in
+    ``next_step`` (a failure's last step costs >= 1), not the reset's zeros; the other
+    ``info`` entries are the reset's.
 
     ## Starting state
 
@@ -387,6 +390,7 @@ class TorchTetherVecEnv:
             terminated = self.failure != 0
             truncated = self.steps_truncated() & ~terminated
             reward = self.reward.clone()  # the last step's, before the reset zeroes it
+            cost = self.cost.clone()      # likewise: the step's cost, not the reset's 0
             final_obs = self.obs.clone()
             final_failure = self.failure.clone()
             ended = terminated | truncated
@@ -395,6 +399,8 @@ class TorchTetherVecEnv:
             info = self.info()
             info["final_obs"] = final_obs
             info["final_failure"] = final_failure
+            for c, name in enumerate(COST_NAMES):
+                info[name] = cost[:, c]
             return self.obs.clone(), reward, terminated, truncated, info
         if bool(done.any()):
             self._reset_rows(done)

@@ -141,3 +141,21 @@ def test_one_step_cost_equals_numba_on_every_row(n_bodies):
     # the thresholds are the configuration's: the defaults would cost otherwise
     default = env.cc._replace(cost=CostThresholds().record(config.episode.length_bounds))
     assert not torch.equal(chain.cost(env.y, env.tension_min, default), env.cost)
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+def test_the_failing_step_reports_its_cost_in_both_autoreset_modes(mode):
+    """A same_step autoreset returns the ended step's cost (as its reward), not the reset's."""
+    env = TorchTetherVecEnv(8, device="cpu", seed=5, autoreset_mode=mode, action_mode="rate")
+    env.reset()
+    wild = torch.ones((8, 2), dtype=torch.float64)  # reel out flat out: ends early
+    for _ in range(2000):
+        _, _, term, _, info = env.step(wild)
+        if term.any():
+            break
+    assert term.any()
+    assert torch.all(info["cost"][term] >= 1.0), info["cost"][term]
+    parts = info["cost_slack"] + info["cost_length"] + info["cost_tumble"]
+    assert torch.equal(info["cost"], parts)
+    if mode == "same_step":
+        assert torch.all(env.cost[term] == 0.0)  # the ended rows are reset already
