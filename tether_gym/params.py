@@ -24,7 +24,7 @@ from __future__ import annotations
 import math
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from enum import Enum
 
 import numpy as np
@@ -282,3 +282,29 @@ class ReelParams:
         check_range("time_constant", self.time_constant, 0.0, low_open=True)
         check_range("max_reel_rate", self.max_rate, 0.0, 10.0, low_open=True)
 
+
+
+def weights_from_dict(cls, values, argument: str, noun: str):
+    """A frozen dataclass ``cls`` of defaults from a ``gym.make`` dict argument.
+
+    None gives the defaults, an instance of ``cls`` is returned as it is, a dict
+    overrides fields by name. Errors name ``argument`` (e.g. ``reward_weights['effort']``):
+    TypeError for anything but a dict, ValueError for an unknown key (listing the valid
+    ones) or a value its field refuses.
+    """
+    if values is None:
+        return cls()
+    if isinstance(values, cls):
+        return values
+    if not isinstance(values, dict):
+        raise TypeError(f"{argument}={values!r} must be a dict of {noun} (or None), got "
+                        f"{type(values).__name__}")
+    valid = set(asdict(cls()))
+    unknown = sorted(set(values) - valid)
+    if unknown:
+        raise ValueError(f"unknown {argument} keys {unknown}; valid keys: {sorted(valid)}")
+    try:
+        return cls(**values)
+    except (TypeError, ValueError) as exc:  # name the argument the user passed
+        raise renamed_error(exc, {key: f"{argument}[{key!r}]" for key in valid},
+                            prefix=f"{argument}: ") from None

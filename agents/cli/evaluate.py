@@ -51,7 +51,9 @@ NOTES = (
     "(and its worst scenario), every other metric as the interquartile mean over training "
     "runs x scenarios of each run's mean over its episodes, with 95 % stratified-bootstrap "
     "intervals (2 runs or more), the compute time per control step, and the probability "
-    "of improvement over smc.",
+    "of improvement over smc. Cost (v2's info['cost'], docs/safe_rl.md): the mean cost "
+    "per step as such an IQM, and the fraction of all episodes whose mean cost per step "
+    "exceeds tether_gym.tasks.cost.COST_LIMIT (raw, like success).",
     "Scenarios are defined for any number of bodies (per-tether values follow n_bodies, "
     "agents/evaluation/scenarios.py). Trained agents run on the n_bodies, amplitude, "
     "frequency and control_step their agent.json records, for every policy of the call, "

@@ -1,7 +1,7 @@
 """Train an agent on a tether_gym environment: the command line of ``train.py``.
 
 The learning algorithms (``--algo``) are the rows of
-:data:`~tether_gym_agents.common.algorithms.ALGORITHMS` (PPO, SAC, TQC, TD3 today).
+:data:`~tether_gym_agents.common.algorithms.ALGORITHMS` (PPO, PPO-Lagrangian, SAC, TQC, TD3 today).
 
 ``main`` parses the command line into a ``TrainOptions``, resolves it once into a
 ``TrainSettings`` (both in :mod:`tether_gym_agents.training.settings`) and trains

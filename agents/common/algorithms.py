@@ -149,7 +149,7 @@ _PPO = frozenset({
     "clip_range", "clip_range_vf", "normalize_advantage", "ent_coef", "vf_coef",
     "max_grad_norm", "use_sde", "sde_sample_freq", "rollout_buffer_class",
     "rollout_buffer_kwargs", "target_kl", "stats_window_size", "policy_kwargs"})
-_LAGRANGE = frozenset({"cost_limit", "lagrange_lr", "lagrange_init"})
+_LAGRANGE = frozenset({"cost_limit", "lagrange_lr", "lagrange_init", "failure_cost"})
 """PPOLagrangian's constraint settings (tether_gym_agents.training.lagrangian)."""
 
 ALGORITHMS: Mapping[str, Algorithm] = MappingProxyType({a.name: a for a in (

@@ -71,6 +71,9 @@ BUFFER_KWARGS = {"rollout_buffer_kwargs": (), "replay_buffer_kwargs":
 SB3's RolloutBuffer and ReplayBuffer itself (a repeated or unknown key is a TypeError
 inside stable-baselines3)."""
 
+MAX_COST = 1.0e6
+"""Largest ``failure_cost`` of PPOLagrangian [-] (1 / (1 - gamma) is 1000 at gamma = 0.999)."""
+
 _UNIT = "a number in [0, 1]"
 
 
@@ -229,6 +232,7 @@ _CHECKS: dict[str, Any] = {
     # step (at most 3, the largest cost of a step), the multiplier's step and start
     "cost_limit": _number(0.0, 3.0), "lagrange_lr": _number(0.0, MAX_LOSS_WEIGHT),
     "lagrange_init": _number(0.0, MAX_LOSS_WEIGHT),
+    "failure_cost": _number(0.0, MAX_COST),
     # CapsSAC's/CapsTQC's smoothness weights and perturbation scale (training/caps.py)
     "caps_temporal": _number(0.0, MAX_LOSS_WEIGHT),
     "caps_spatial": _number(0.0, MAX_LOSS_WEIGHT),

@@ -83,15 +83,22 @@ class PPOLagrangian(PPO):
         Step of lambda per rollout per unit of relative violation (J_c - d) / d, >= 0.
     lagrange_init : float
         lambda at the start, >= 0.
+    failure_cost : float
+        Cost added, for the cost critic only, to a step that terminates the episode
+        (a failure), >= 0. 0 (the default, as the shipped row was trained) leaves a
+        terminated episode costing nothing more, which makes ending it the cheapest way
+        to lower the discounted cost; 1 / (1 - gamma) prices the failure as a state that
+        keeps costing 1 per step. J_c (the multiplier's input) counts the env's costs only.
     *args, **kwargs
         PPO's.
     """
 
     def __init__(self, *args, cost_limit: float = COST_LIMIT, lagrange_lr: float = 0.05,
-                 lagrange_init: float = 0.0, **kwargs):
+                 lagrange_init: float = 0.0, failure_cost: float = 0.0, **kwargs):
         self.cost_limit = float(cost_limit)
         self.lagrange_lr = float(lagrange_lr)
         self.lagrange_init = float(lagrange_init)
+        self.failure_cost = float(failure_cost)
         super().__init__(*args, **kwargs)
 
     def _setup_model(self) -> None:
@@ -153,6 +160,8 @@ class PPOLagrangian(PPO):
             costs[i] = float(info["cost"])
         self._env_costs[self.rollout_buffer.pos] = costs
         for i, info in enumerate(infos):
+            if locals_["dones"][i] and not info.get("TimeLimit.truncated", False):
+                costs[i] += self.failure_cost
             if locals_["dones"][i] and info.get("terminal_observation") is not None \
                     and info.get("TimeLimit.truncated", False):
                 costs[i] += self.gamma * self._cost_value(

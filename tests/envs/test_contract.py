@@ -115,6 +115,7 @@ def _step_both(singles, venv, actions, done):
         assert np.array_equal(obs, vobs[b]) and reward == vreward[b], b
         assert (term, trunc) == (vterm[b], vtrunc[b]), b
         assert info["failure"] == vinfo["failure"][b], b
+        assert info["cost"] == vinfo["cost"][b], b
         done[b] = term or trunc
     return vobs, vreward, vterm, vinfo
 
@@ -151,6 +152,7 @@ def test_a_start_whose_draws_all_fail_begins_an_episode_that_ends_at_its_first_s
             elif b in pending:
                 failure, start = pending.pop(b)
                 assert vterm[b] and vreward[b] == 0.0 and vinfo["failure"][b] == failure
+                assert vinfo["cost"][b] >= 1.0  # a failing step costs, a failed start too
                 assert np.array_equal(vobs[b], start)
                 failed_starts += 1
     assert failed_starts >= 3

@@ -27,7 +27,7 @@ import numpy as np
 from ..physics.dispatch import Direct
 from ..physics.kernels import Substeps
 from ..physics.state import STATE
-from ..tasks.cost import COST_NAMES
+from ..tasks.cost import COST_NAMES, cost_terms
 from ..tasks.reference import (
     desired_libration,
     expand_like,
@@ -577,9 +577,10 @@ class ChainBatch:
                            checked: bool) -> np.ndarray:
         """End the listed rows whose episode started failed; return the other rows.
 
-        Their step sets the failure code of the start and counts the step; nothing else
-        changes (the reward stays 0, the observation is the start's) and they draw
-        nothing. The actions of every listed row are checked first.
+        Their step sets the failure code of the start, its cost (of the start's state:
+        at least 1, as every failing step's) and counts the step; nothing else changes
+        (the reward stays 0, the observation is the start's) and they draw nothing. The
+        actions of every listed row are checked first.
 
         Raises
         ------
@@ -596,6 +597,10 @@ class ChainBatch:
         ended = index[stuck]
         self.rows.failure[ended] = self._start_codes[ended]
         self.rows.steps[ended] += 1
+        r = self.rows
+        for b in ended.tolist():  # the ending step costs what the failed start costs
+            cost_terms(r.y[b], self.n, r.tension_min[b], self.cfg.cost, r.cost[b])
+            r.info_s[I.cost[0]:I.cost[0] + r.cost.shape[1], b] = r.cost[b]
         self._start_failed[ended] = False
         self._any_start_failed = bool(self._start_failed.any())
         return index[~stuck]

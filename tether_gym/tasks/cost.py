@@ -31,12 +31,12 @@ is trained against it.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import NamedTuple
 
 from numba import njit
 
-from ..params import check_range, renamed_error
+from ..params import check_range, weights_from_dict
 from ..physics.jit import INLINE
 from ..physics.layout import at
 from ..physics.state import S
@@ -84,23 +84,7 @@ class CostThresholds:
     @classmethod
     def from_dict(cls, values: dict | CostThresholds | None) -> CostThresholds:
         """Build from a dict, rejecting unknown keys with the list of valid ones."""
-        if values is None:
-            return cls()
-        if isinstance(values, CostThresholds):
-            return values
-        if not isinstance(values, dict):
-            raise TypeError(f"cost_thresholds={values!r} must be a dict of thresholds (or "
-                            f"None), got {type(values).__name__}")
-        valid = set(asdict(cls()))
-        unknown = sorted(set(values) - valid)
-        if unknown:
-            raise ValueError(f"unknown cost_thresholds keys {unknown}; valid keys: "
-                             f"{sorted(valid)}")
-        try:
-            return cls(**values)
-        except (TypeError, ValueError) as exc:  # name the argument the user passed
-            raise renamed_error(exc, {key: f"cost_thresholds[{key!r}]" for key in valid},
-                                prefix="cost_thresholds: ") from None
+        return weights_from_dict(cls, values, "cost_thresholds", "thresholds")
 
     def record(self, length_bounds: tuple[float, float]) -> CostParams:
         """The thresholds as the kernels take them, for the env's ``length_bounds`` [-]."""

@@ -53,12 +53,12 @@ from __future__ import annotations
 
 import math
 from collections import namedtuple
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import dataclass, field, fields
 from typing import NamedTuple
 
 from numba import njit
 
-from ..params import check_range, renamed_error
+from ..params import check_range, weights_from_dict
 from ..physics.jit import INLINE
 from ..physics.layout import at
 from ..physics.state import S
@@ -138,22 +138,7 @@ class RewardWeights:
     @classmethod
     def from_dict(cls, values: dict | RewardWeights | None) -> RewardWeights:
         """Build from a dict, rejecting unknown keys with the list of valid ones."""
-        if values is None:
-            return cls()
-        if isinstance(values, RewardWeights):
-            return values
-        if not isinstance(values, dict):
-            raise TypeError(f"reward_weights={values!r} must be a dict of weights (or None), "
-                            f"got {type(values).__name__}")
-        valid = set(asdict(cls()))
-        unknown = sorted(set(values) - valid)
-        if unknown:
-            raise ValueError(f"unknown reward_weights keys {unknown}; valid keys: {sorted(valid)}")
-        try:
-            return cls(**values)
-        except (TypeError, ValueError) as exc:  # name the argument the user passed
-            raise renamed_error(exc, {key: f"reward_weights[{key!r}]" for key in valid},
-                                prefix="reward_weights: ") from None
+        return weights_from_dict(cls, values, "reward_weights", "weights")
 
     def record(self) -> RewardParams:
         """The weights as the kernels take them."""

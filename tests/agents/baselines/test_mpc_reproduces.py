@@ -1,11 +1,11 @@
 """The shipped ``mpc`` figures reproduce: shipped episodes re-run against docs/eval_mpc.
 
-``docs/eval_mpc/results.json`` holds every episode of ``python evaluate.py mpc predictive
-smc smc_filtered --out docs/eval_mpc`` with its metrics over the whole episode (754
-control steps). The episodes below are re-run, whole, through the pieces that command
-uses (the registry's ``mpc`` behind its filter, the rollout, the episode metrics) and
-compared with their shipped records: success and failure flags exactly, every real
-metric to a relative 1e-6.
+``docs/eval_mpc/results.json`` holds every episode of ``python evaluate.py mpc --suite
+default --out docs/eval_mpc`` with its metrics (the cost per step among them) over the
+whole episode (754 control steps). The episodes below are re-run, whole, through the
+pieces that command uses (the registry's ``mpc`` behind its filter, the rollout, the
+episode metrics) and compared with their shipped records: success and failure flags
+exactly, every real metric to a relative 1e-6.
 
 Why so tight: the closed loop is chaotic at the last bit. Scaling the move weight by
 (1 + 1e-15) moves the paper episode's tracking RMS after orbit 1 from 5.7e-7 to 1.7e-6
@@ -46,7 +46,7 @@ RTOL = 1e-6
 
 def _shipped(scenario: str, seed: int) -> dict:
     data = json.loads(RESULTS.read_text())
-    assert data["meta"]["command"].startswith("evaluate.py mpc predictive smc smc_filtered")
+    assert data["meta"]["command"].startswith("evaluate.py mpc --suite default --out")
     (record,) = [e for e in data["episodes"]
                  if e["policy"] == "mpc" and e["scenario"] == scenario and e["seed"] == seed]
     return record

@@ -131,3 +131,15 @@ def test_ppo_lag_on_an_env_without_cost_is_refused_before_training(tmp_path, cap
     err = capsys.readouterr().err
     assert "ppo_lag" in err and "cost" in err
     assert not (out / rf.FINAL_MODEL_FILE).exists()
+
+
+def test_failure_cost_is_added_to_the_critics_cost_of_a_failing_step_only():
+    """failure_cost lands on the steps that terminate (not truncate), never in J_c."""
+    model = _model(initial_theta=(0.9, -0.9), init_theta_range=0.2)
+    model.failure_cost = 7.0
+    model.learn(32 * 4)
+    extra = model._costs - model._env_costs
+    assert set(np.round(np.unique(extra), 6)) == {0.0, 7.0}  # episodes failed in the rollout
+    rate, d = float(model._env_costs.mean()), model.cost_limit  # J_c without the extra
+    assert float(model.lagrange_multiplier) == pytest.approx(max(0.0, 0.05 * (rate - d) / d),
+                                                             rel=1e-6)
