@@ -42,6 +42,9 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
     "python train.py --config agents/configs/ppo_residual.yml --out runs/hybrid": TRAIN_TINY,
     "python train.py --algo sac --out runs/sac": TRAIN_TINY,
     "python train.py --algo tqc --out runs/tqc": TRAIN_TINY,
+    # its config's batch of 512 needs its 64 envs (one fitted rollout of 64 x 1 steps)
+    "python train.py --algo ppo_lag --out runs/ppo_lag":
+        ("--timesteps", "64", "--eval-episodes", "1", "--no-progress"),
     "python -m tether_gym_agents.files export runs/ppo shipped/ppo": (),
     # How the benchmark is computed
     "python evaluate.py": EVAL_TINY + ("--suite", "paper") + SHORT_EPISODES,

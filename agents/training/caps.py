@@ -187,15 +187,17 @@ class CapsMixin(_OffPolicy):
             self.logger.record("train/ent_coef_loss", np.mean(ent_coef_losses))
 
 
-def _signature(base):
-    """``base.__init__``'s signature with the smoothness keywords.
+def signature_with(base, extra=CAPS_DEFAULTS) -> inspect.Signature:
+    """``base.__init__``'s signature with the keyword-only ``(name, default)`` pairs ``extra``.
 
-    train.py checks a config's keys against the signature of the class it trains.
+    train.py and the algorithm table check a config's keys against the signature of the
+    class it trains; a subclass taking ``*args, **kwargs`` on to ``base`` sets this as its
+    ``__init__.__signature__``. By default ``extra`` is the smoothness keywords.
     """
     params = inspect.signature(base.__init__).parameters.values()
     return inspect.signature(base.__init__).replace(parameters=[
         *params, *(inspect.Parameter(name, inspect.Parameter.KEYWORD_ONLY, default=default)
-                   for name, default in CAPS_DEFAULTS)])
+                   for name, default in extra)])
 
 
 class CapsSAC(CapsMixin, SAC):
@@ -204,7 +206,7 @@ class CapsSAC(CapsMixin, SAC):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
 
-    __init__.__signature__ = _signature(SAC)  # type: ignore[attr-defined]
+    __init__.__signature__ = signature_with(SAC)  # type: ignore[attr-defined]
 
     def _critic_loss(self, replay_data, ent_coef, discounts, batch_size: int) -> th.Tensor:
         """SAC's clipped double-Q target and the mean squared error of each critic."""
@@ -252,7 +254,7 @@ def caps_tqc_class():
         def __init__(self, *args, **kwargs):
             super().__init__(*args, **kwargs)
 
-        __init__.__signature__ = _signature(TQC)
+        __init__.__signature__ = signature_with(TQC)
 
         def _critic_loss(self, replay_data, ent_coef, discounts, batch_size: int
                          ) -> th.Tensor:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import gymnasium as gym
 
-from ..common.algorithms import algorithm, split_name
+from ..common.algorithms import ALGORITHMS, algorithm, split_name
 from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from ..common.features import FeatureSpec
 from ..common.jsonio import to_jsonable
@@ -28,9 +28,24 @@ __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_
            "load_hyperparams", "with_schedules", "residual_spec", "feature_spec",
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
            "check_env_id", "algo_class", "check_algo_params", "check_counts", "fit_rollout",
-           "NOISE_TYPES", "NOISE_STD_MAX", "action_noise", "MAX_TIMESTEPS"]
+           "NOISE_TYPES", "NOISE_STD_MAX", "action_noise", "MAX_TIMESTEPS",
+           "config_algo"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
+
+
+def config_algo(path: str | Path) -> str | None:
+    """The algorithm a packaged config of :data:`CONFIG_DIR` is for, or None.
+
+    The longest algorithm name the file's stem is or starts with followed by ``_``:
+    ``ppo_fast.yml`` is PPO's (``--algo ppo --config ...``), ``ppo_lag.yml`` is
+    ``ppo_lag``'s, ``gpu_ppo.yml`` none (``train.py gpu``'s own format).
+    """
+    stem = Path(path).stem
+    names = [name for name in ALGORITHMS if stem == name or stem.startswith(name + "_")]
+    return max(names, key=len) if names else None
+
+
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
             "checkpoint_freq", "residual", "features", "noise_type", "noise_std")
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck")

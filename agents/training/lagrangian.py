@@ -27,6 +27,7 @@ the policy (``_get_torch_save_params``), so ``train.py --resume`` continues them
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, cast
 
 import numpy as np
@@ -38,6 +39,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from tether_gym.tasks.cost import COST_LIMIT
+from tether_gym_agents.training.caps import signature_with
 
 __all__ = ["PPOLagrangian"]
 
@@ -222,3 +224,10 @@ class PPOLagrangian(PPO):
                 self.cost_optimizer.step()
                 losses.append(loss.item())
         return float(np.mean(losses)) if losses else 0.0
+
+
+_OWN_KEYWORDS = tuple((name, p.default) for name, p in
+                      inspect.signature(PPOLagrangian.__init__).parameters.items()
+                      if p.kind is inspect.Parameter.KEYWORD_ONLY)
+PPOLagrangian.__init__.__signature__ = signature_with(  # type: ignore[attr-defined]
+    PPO, _OWN_KEYWORDS)

@@ -57,7 +57,10 @@ def test_every_run_is_complete_and_acts_on_the_current_env(name):
         for file in RUN_FILES:
             assert (run / file).is_file(), (run, file)
         _, meta = load_agent(run)
-        assert meta["algo"] in ALGOS and meta["env"]["id"] == tether_gym.ENV_ID
+        # runs trained before v2 record v1: v2 returns exactly what v1 did, plus the
+        # cost entries of info (tests/envs/test_env_versions.py), and they run on v2 below
+        assert meta["algo"] in ALGOS
+        assert meta["env"]["id"] in (tether_gym.ENV_ID, tether_gym.ENV_ID_V1)
         assert (meta.get("hybrid") is not None) == (SHIPPED[name] == "hybrid")
         assert meta["features"] == FEATURES.get(name)
         info = json.loads((run / "train_info.json").read_text())

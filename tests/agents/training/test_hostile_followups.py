@@ -126,7 +126,7 @@ def test_resume_of_a_run_whose_algo_is_not_a_name_is_one_line(tiny_run, tmp_path
     _edit_config(out, "algo: ppo\n", "algo: [td3]\n")
     assert main(["--resume", "--out", str(out), "--timesteps", "64", "--no-progress"]) == 2
     assert _one_line(capsys) == (f"train.py: error: --resume: {out / 'config.yml'}: algo: "
-                                 "['td3'] must be one of ['ppo', 'sac', 'td3', 'tqc']")
+                                 "['td3'] must be one of ['ppo', 'ppo_lag', 'sac', 'td3', 'tqc']")
 
 
 @pytest.mark.parametrize("kind", ["fifo", "folder", "dev-zero link"])

@@ -145,13 +145,13 @@ def test_every_shipped_config_is_within_the_bounds():
 
     import yaml
 
-    from tether_gym_agents.training.config import CONFIG_DIR, load_hyperparams
+    from tether_gym_agents.training.config import CONFIG_DIR, config_algo, load_hyperparams
 
     checked = 0
     for path in sorted(glob.glob(str(CONFIG_DIR / "*.yml"))):
         name = path.rsplit("/", 1)[-1]
-        algo = name.split(".")[0].split("_")[0]
-        if algo not in ALGORITHMS:
+        algo = config_algo(name)
+        if algo is None:
             continue  # gpu_*.yml: train.py gpu's own format and bounds
         for env_id in yaml.safe_load(open(path)):
             if env_id != "default":

@@ -94,9 +94,11 @@ def test_bad_value_in_a_resumed_config_is_named(tmp_path, capsys, no_training):
 
 @pytest.mark.parametrize("algo", ["ppo", "sac"])
 def test_shipped_configs_and_sb3_forms_pass(algo):
-    from tether_gym_agents.training.config import CONFIG_DIR, load_hyperparams
+    from tether_gym_agents.training.config import CONFIG_DIR, config_algo, load_hyperparams
 
-    for path in CONFIG_DIR.glob(f"{algo}*.yml"):
+    paths = [p for p in CONFIG_DIR.glob("*.yml") if config_algo(p) == algo]
+    assert paths  # ppo.yml and ppo_fast.yml are PPO's; ppo_lag.yml is not
+    for path in paths:
         load_hyperparams(path, algo, "tether_gym/TetherLibration-v2")
     good = {"learning_rate": "lin_3e-4", "gamma": 1, "use_sde": False, "sde_sample_freq": -1,
             "policy_kwargs": {"net_arch": [64, 64], "activation_fn": "nn.Tanh",

@@ -15,6 +15,7 @@ import pytest
 
 from tether_gym.envs import EnvConfig
 from tether_gym_agents.cli.train import build_parser
+from tether_gym_agents.common.algorithms import ALGORITHMS
 from tether_gym_agents.files import pretrained_agents
 from tether_gym_agents.files.run_folder import read_config
 from tether_gym_agents.training.settings import TrainOptions, resolve_settings
@@ -76,6 +77,6 @@ def test_command_txt_parses_into_a_from_scratch_run(name, run, tmp_path, monkeyp
     steps = info["num_timesteps"]
     assert info["wall_time_s"] > 0  # every call's time, killed parts included
     hp = recorded["hyperparams"]  # PPO collects n_steps per env, SAC train_freq (steps)
-    rollout = hp["n_steps"] if recorded["algo"] == "ppo" else hp.get("train_freq", 1)
+    rollout = hp["n_steps"] if ALGORITHMS[recorded["algo"]].on_policy else hp.get("train_freq", 1)
     rollout *= recorded["n_envs"]
     assert budget <= steps < budget + rollout * (1 + len(later))

@@ -117,4 +117,4 @@ def test_an_unknown_algorithm_lists_td3(capsys):
     with pytest.raises(SystemExit) as exc:
         main(["--algo", "dqn"])
     assert exc.value.code == 2
-    assert "'ppo', 'sac', 'td3', 'tqc'" in capsys.readouterr().err
+    assert "'ppo', 'ppo_lag', 'sac', 'td3', 'tqc'" in capsys.readouterr().err
