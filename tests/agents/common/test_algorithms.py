@@ -127,7 +127,8 @@ def test_names():
     assert algorithm("TD3") is ALGORITHMS["td3"]
     with pytest.raises(TypeError, match=r"\['ppo'\] must be a string"):
         algorithm(["ppo"])
-    with pytest.raises(ValueError, match=r"'dqn' is not one of \['ppo', 'ppo_lag', 'sac', 'td3', 'tqc'\]"):
+    with pytest.raises(ValueError,
+                       match=r"'dqn' is not one of \['ppo', 'ppo_lag', 'sac', 'td3', 'tqc'\]"):
         algorithm("dqn")
 
 

@@ -144,7 +144,8 @@ BAD = {
                   r"obs_normalization.var\[1\]=1e\+300; allowed: finite numbers >= 0 "
                   r"and <= 1e\+12"),
     "algo list": (_set("algo", value=["ppo"]),
-                  r"algo: algorithm \['ppo'\] must be a string, one of \['ppo', 'ppo_lag', 'sac', "),
+                  r"algo: algorithm \['ppo'\] must be a string, one of "
+                  r"\['ppo', 'ppo_lag', 'sac', "),
     "weights extra key": (_weights_extra,
                           r"weights=.*allowed: a mapping of exactly \['file', 'module', "
                           r"'sha256'\] \(unknown: \['note'\], missing: \[\]\)"),

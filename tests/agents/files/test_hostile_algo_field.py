@@ -27,10 +27,11 @@ def _edited(tmp_path, **changes) -> Path:
 
 
 @pytest.mark.parametrize("changes, message", [
-    ({"algo": ["ppo"]}, "algo: algorithm ['ppo'] must be a string, one of ['ppo', 'ppo_lag', 'sac', "
-                        "'td3', 'tqc']"),
+    ({"algo": ["ppo"]}, "algo: algorithm ['ppo'] must be a string, one of "
+                        "['ppo', 'ppo_lag', 'sac', 'td3', 'tqc']"),
     ({"algo": None}, "algo: algorithm None must be a string"),
-    ({"algo": "dqn"}, "algo: algorithm 'dqn' is not one of ['ppo', 'ppo_lag', 'sac', 'td3', 'tqc']"),
+    ({"algo": "dqn"},
+     "algo: algorithm 'dqn' is not one of ['ppo', 'ppo_lag', 'sac', 'td3', 'tqc']"),
     ({"algo": "PPO"}, "algo='PPO'; allowed: ['ppo', 'ppo_lag', 'sac', 'td3', 'tqc'] (lower case)"),
     ({"algo": "td3"}, "policy_class='ActorCriticPolicy' does not fit algo 'td3'; allowed: "
                       "'TD3Policy'"),
