@@ -5,11 +5,12 @@ then runs :func:`tether_gym_agents.evaluation.benchmark.evaluate` and prints its
 ``evaluate.py paper --out DIR`` (alias ``--paper``) runs
 :func:`tether_gym_agents.paper.cli.run`; ``evaluate.py curves RUNS... --out DIR``
 evaluates every checkpoint of folders of seed runs on a suite
-(:mod:`tether_gym_agents.evaluation.curves`). A policy name is anything the policy registry
-resolves (:mod:`tether_gym_agents.evaluation.registry`), including the policies that user
-code registered with :func:`tether_gym_agents.register_policy` before calling
-:func:`main`. A bad argument, such as an unknown policy, is one ``evaluate.py: error:``
-line on stderr and exit code 2.
+(:mod:`tether_gym_agents.evaluation.curves`); ``evaluate.py dataset POLICY...`` writes
+Minari demonstration datasets (:mod:`tether_gym_agents.cli.dataset`). A policy name is
+anything the policy registry resolves (:mod:`tether_gym_agents.evaluation.registry`),
+including the policies that user code registered with
+:func:`tether_gym_agents.register_policy` before calling :func:`main`. A bad argument,
+such as an unknown policy, is one ``evaluate.py: error:`` line on stderr and exit code 2.
 """
 
 from __future__ import annotations
@@ -40,10 +41,12 @@ from ..evaluation.registry import BASELINES, default_policies, resolve_policy
 from ..evaluation.results import markdown_tables
 from ..evaluation.scenarios import describe_suites, get_suite
 from ..files.trained import refuse_special_file
+from .dataset import add_arguments as add_dataset_arguments
+from .dataset import run as dataset_run
 
 __all__ = ["main", "build_parser"]
 
-COMMANDS = ("bench", "paper", "curves")
+COMMANDS = ("bench", "paper", "curves", "dataset")
 NOTES = (
     "A suite file (--suite FILE.yml) lists scenarios as YAML: 'scenarios: [{name: ..., "
     "description: ..., env_kwargs: {...}, nominal: {masses: [...], eccentricity: ...}}]'.",
@@ -113,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Benchmark policies on tether_gym scenario suites (evaluate.py [bench] "
                     "...), or reproduce the paper's figures (evaluate.py paper ...).",
         epilog=epilog)
-    sub = top.add_subparsers(dest="command", metavar="{bench,paper,curves}")
+    sub = top.add_subparsers(dest="command", metavar="{bench,paper,curves,dataset}")
     bench = sub.add_parser("bench", help="benchmark policies (the default command)",
                            prog="evaluate.py [bench]", epilog=epilog,
                            formatter_class=argparse.RawDescriptionHelpFormatter,
@@ -145,6 +148,13 @@ def build_parser() -> argparse.ArgumentParser:
     curves.add_argument("--success", type=float, default=0.99,
                         help="threshold success fraction (default 0.99)")
     curves.add_argument("--out", required=True, help="output folder")
+    dataset = sub.add_parser("dataset", help="Minari demonstration datasets of policies "
+                                             "(the datasets extra; docs/datasets.md)",
+                             prog="evaluate.py dataset",
+                             description="Roll each policy out on the learners' training "
+                                         "distribution and write a Minari dataset "
+                                         "(MINARI_DATASETS_PATH, else ~/.minari/datasets).")
+    add_dataset_arguments(dataset)
     return top
 
 
@@ -242,6 +252,8 @@ def main(argv=None) -> int:
         return paper_run(args)  # it checks --out before any study
     if args.command == "curves":
         return _curves(args)
+    if args.command == "dataset":
+        return dataset_run(args)
     return _bench(args, command)
 
 
