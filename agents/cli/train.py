@@ -56,6 +56,10 @@ def main(argv=None) -> int:
         from ..accel.cli import main as gpu_main
 
         return gpu_main(argv[1:])
+    if argv[:1] == ["distill"]:  # DAgger: a network trained on mpc's labels
+        from ..training.distill_cli import main as distill_main
+
+        return distill_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         options = TrainOptions.from_namespace(args)

@@ -1,0 +1,500 @@
+"""A policy distilled from ``mpc`` by DAgger: the student network, its data and its loop.
+
+DAgger (Ross, Gordon & Bagnell 2011) with the model-predictive controller of the
+benchmark as the expert: the ``mpc`` row's controller
+(:class:`~tether_gym_agents.baselines.mpc.ModelPredictiveController` behind the safety
+filter, :class:`~tether_gym_agents.hybrids.policies.FilteredPolicy`, as
+:func:`tether_gym_agents.evaluation.nominal.nominal_mpc` builds it).
+
+Iteration i rolls out ``episodes`` episodes of the mixture policy that sends the
+expert's action with probability beta_i = ``beta_decay`` ** i at each step and the
+student's otherwise (iteration 0: the expert alone, beta = 1). The expert labels EVERY
+visited observation: one controller per episode is called on each step's observation
+in order (its warm start follows the trajectory actually flown), whichever action is
+executed. All (observation, expert action) pairs are aggregated over the iterations,
+and the student is refitted after each iteration by supervised regression: the mean
+squared error between its deterministic action and the expert's, both in the [-1, 1]
+action box. After each refit the student flies ``check_episodes`` episodes alone
+(beta = 0, not labelled: they cost no expert time) on fixed seeds of the same
+distribution, and their success and tracking RMS are reported.
+
+**Episodes.** The training distribution is ``ppo.yml``'s env arguments (random
+initial libration, e in [0, 0.35], masses +-25 %, disturbance 0.1, observation noise
+1e-3; :func:`training_env_kwargs`), in ``action_mode="rate"``: the student commands
+reel rates, as the expert does, so the label is the expert's action itself (in the
+increment mode of the PPO agents the command is a clipped sum of actions, and the
+expert's command is not always one increment away). Each labelled episode draws its
+e and masses from those ranges (:func:`draw_episode`) and fixes them in its env, so that
+the expert designs on the episode's exact model, as ``mpc`` does on every scenario of
+the suites. The student sees only the env's observation (``observe_params`` false:
+no e, no masses): nothing privileged.
+
+**Student.** A stable-baselines3 ``ActorCriticPolicy`` (so that the agent files are
+the PPO agents' format and ``evaluate.py`` scores it by the same path) whose action
+network is an MLP, ``net_arch`` (256, 256) tanh by default: tanh keeps the map smooth
+(the expert's law is smooth away from its active constraints, and the closed loop asks
+for corrections of 1e-5 rad), and two layers of 256 cost about 0.1 ms per step
+in the float64 forward pass of evaluation. Its value network (``vf``) is a single
+unused linear layer. Observations are normalised with the aggregated dataset's mean and
+variance by VecNormalize's formula (clip 10, epsilon 1e-8), saved as ``obs_normalization``
+in ``agent.json``. The network is warm-started from the previous iteration's weights;
+each refit runs ``epochs`` passes of Adam (minibatch ``batch_size``, learning rate
+``learning_rate`` decaying by a cosine to 1 % of it over the refit).
+
+**Outputs** (:func:`train_dagger`): the run folder holds ``agent.json`` +
+``policy.safetensors`` (the last student), ``checkpoints/agent_<labels>_steps/`` (the
+student after each iteration; its "steps" are the labels it was fitted on, so ``python
+evaluate.py curves RUN`` draws a curve over labels), ``dagger_data.npz`` (the
+aggregated observations, labels, and each pair's iteration, episode and whether the
+expert's action was executed), ``train_log.json`` (one record per iteration),
+``train_info.json``, ``config.yml`` and ``command.txt``.
+
+Deterministic for a given seed (one torch thread; the expert is deterministic).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+
+import numpy as np
+
+import tether_gym
+
+from ..files.run_folder import (
+    CHECKPOINT_AGENT_PREFIX,
+    CHECKPOINT_DIR,
+    append_command,
+    write_config,
+    write_train_info,
+)
+from ..files.safe_format import ObsNormalization, save_agent
+from ..files.trained import TrainedAgent
+from .config import CONFIG_DIR, load_hyperparams
+
+__all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
+           "draw_episode", "make_expert", "rollout", "make_student", "fit_student",
+           "normalization", "train_dagger", "DATA_FILE", "TRAIN_LOG_FILE", "ALGO"]
+
+DATA_FILE = "dagger_data.npz"
+TRAIN_LOG_FILE = "train_log.json"
+ALGO = "ppo"
+"""The algorithm recorded in ``agent.json``: the student is a PPO-format policy (its
+``training.method`` says ``dagger``)."""
+SEED_MAX = 2**31 - 1
+LIMITS: dict[str, tuple[float, float]] = {
+    "iterations": (1, 100), "episodes": (1, 10_000), "epochs": (1, 100_000),
+    "seed": (0, SEED_MAX), "orbits": (0.01, 100.0), "beta_decay": (0.0, 1.0),
+    "batch_size": (1, 1_000_000), "learning_rate": (1e-7, 1.0), "check_episodes": (0, 10_000),
+}
+"""Valid range (inclusive) of each numeric setting of :class:`DaggerSettings`."""
+_INTEGERS = ("iterations", "episodes", "epochs", "seed", "batch_size", "check_episodes")
+_MAX_WIDTH, _MAX_DEPTH = 4096, 8
+
+
+@dataclass(frozen=True)
+class DaggerSettings:
+    """The budget and the student of one DAgger run (ranges: :data:`LIMITS`).
+
+    Attributes
+    ----------
+    iterations : int
+        DAgger iterations (iteration 0 is the expert alone).
+    episodes : int
+        Labelled episodes per iteration.
+    epochs : int
+        Passes over the aggregated dataset per refit.
+    seed : int
+        Seeds the episodes' draws, the mixture and the network.
+    orbits : float or None
+        Episode length [orbits] (None: the env's default, 3).
+    beta_decay : float
+        beta_i = beta_decay ** i, the probability that the mixture sends the expert's
+        action in iteration i [-].
+    net_arch : tuple of int
+        Hidden widths of the student's MLP (tanh).
+    batch_size, learning_rate : int, float
+        Adam's minibatch and initial step size.
+    check_episodes : int
+        Unlabelled episodes the student flies alone after each refit (its report).
+    """
+
+    iterations: int = 5
+    episodes: int = 6
+    epochs: int = 100
+    seed: int = 0
+    orbits: float | None = None
+    beta_decay: float = 0.5
+    net_arch: tuple[int, ...] = (256, 256)
+    batch_size: int = 256
+    learning_rate: float = 1e-3
+    check_episodes: int = 4
+
+    def __post_init__(self):
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in LIMITS and value is not None:
+                _check_number(f.name, value, *LIMITS[f.name], f.name in _INTEGERS)
+        arch = self.net_arch
+        if not isinstance(arch, tuple) or not 1 <= len(arch) <= _MAX_DEPTH or not all(
+                isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= _MAX_WIDTH
+                for w in arch):
+            raise ValueError(f"net_arch={arch!r}: allowed a tuple of 1 to {_MAX_DEPTH} layer "
+                             f"widths, each an integer in [1, {_MAX_WIDTH}]")
+
+
+def _check_number(name: str, value, lo: float, hi: float, integer: bool) -> None:
+    kind = "an integer" if integer else "a number"
+    ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+    if not ok or isinstance(value, bool) or not math.isfinite(value) or not lo <= value <= hi:
+        raise ValueError(f"{name}={value!r}: allowed {kind} in [{lo:g}, {hi:g}]")
+
+
+# ----------------------------------------------------------------------------- data
+@dataclass
+class Episode:
+    """One rolled-out episode.
+
+    ``obs`` (T, d) float32: the observations acted on; ``labels`` (T, n): the expert's
+    action on each (None when not labelled); ``expert_acted`` (T,) bool: whether the
+    expert's action was executed; ``survived``: not terminated; ``tracking_rms``
+    [rad]: RMS of theta - theta_d over the steps after orbit 1 (None without such steps).
+    """
+
+    obs: np.ndarray
+    labels: np.ndarray | None
+    expert_acted: np.ndarray
+    survived: bool
+    tracking_rms: float | None
+
+
+@dataclass
+class Dataset:
+    """The aggregated (observation, expert action) pairs of a DAgger run.
+
+    ``obs`` (N, d) float32, ``labels`` (N, n) float64, and per pair its ``iteration``,
+    ``episode`` (numbered over the run) and ``expert_acted``; ``episodes`` holds per
+    episode what re-creates it: its env seed, e [-], masses, beta [-] and the seed of
+    the mixture's draws.
+    """
+
+    obs: np.ndarray
+    labels: np.ndarray
+    iteration: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
+    episode: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int32))
+    expert_acted: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    episodes: list[dict] = field(default_factory=list)
+
+    @classmethod
+    def empty(cls, obs_dim: int, act_dim: int) -> Dataset:
+        """No pairs yet."""
+        return cls(np.zeros((0, obs_dim), np.float32), np.zeros((0, act_dim)))
+
+    def add(self, episode: Episode, iteration: int, number: int, about: dict) -> None:
+        """Append a labelled episode's pairs; ``about``: its entry of ``episodes``."""
+        if episode.labels is None:
+            raise ValueError("an unlabelled episode cannot be aggregated")
+        count = len(episode.obs)
+        self.obs = np.concatenate([self.obs, episode.obs.astype(np.float32)])
+        self.labels = np.concatenate([self.labels, episode.labels])
+        self.iteration = np.concatenate([self.iteration, np.full(count, iteration, np.int32)])
+        self.episode = np.concatenate([self.episode, np.full(count, number, np.int32)])
+        self.expert_acted = np.concatenate([self.expert_acted, episode.expert_acted])
+        self.episodes.append(dict(about))
+
+    def __len__(self) -> int:
+        return len(self.obs)
+
+    def save(self, path: Path) -> None:
+        """Write the arrays as an ``.npz`` (no pickle)."""
+        arrays: dict[str, np.ndarray] = {
+            "obs": self.obs, "labels": self.labels, "iteration": self.iteration,
+            "episode": self.episode, "expert_acted": self.expert_acted}
+        for key in ("env_seed", "eccentricity", "masses", "beta", "mixture_seed"):
+            arrays[f"episode_{key}"] = np.asarray([e[key] for e in self.episodes])
+        np.savez_compressed(path, **arrays)  # type: ignore[arg-type]
+
+
+# ------------------------------------------------------------------------ episodes
+def training_env_kwargs(orbits: float | None = None) -> dict:
+    """The training distribution: ``ppo.yml``'s env arguments in ``action_mode="rate"``.
+
+    ``increment_gain`` (meaningless in the rate mode) is left out; ``orbits`` sets
+    ``orbits_per_episode`` when given.
+    """
+    params = load_hyperparams(CONFIG_DIR / "ppo.yml", "ppo", tether_gym.ENV_ID)
+    kwargs = {k: v for k, v in dict(params.get("env_kwargs") or {}).items()
+              if k != "increment_gain"}
+    kwargs["action_mode"] = "rate"
+    if orbits is not None:
+        kwargs["orbits_per_episode"] = float(orbits)
+    return kwargs
+
+
+def draw_episode(rng: np.random.Generator, env_kwargs: dict, masses) -> dict:
+    """One episode's env arguments: e and the masses drawn from the ranges, then fixed.
+
+    e ~ U(``eccentricity_range``) and m_i ~ m_i U(1 +- ``mass_range``) as the env draws
+    them (``masses``: the nominal ones); the ranges are removed and the drawn values
+    given, so that the expert can design on the episode's model.
+    """
+    kwargs = dict(env_kwargs)
+    ecc_range = kwargs.pop("eccentricity_range", None)
+    mass_range = kwargs.pop("mass_range", None)
+    if ecc_range is not None:
+        kwargs["eccentricity"] = float(rng.uniform(*ecc_range))
+    if mass_range is not None:
+        nominal = np.asarray(masses, dtype=float)
+        scale = rng.uniform(1.0 - mass_range, 1.0 + mass_range, nominal.shape)
+        kwargs["masses"] = tuple(float(m) for m in nominal * scale)
+    return kwargs
+
+
+def make_expert(env):
+    """``mpc`` on ``env``'s own model behind the safety filter (one per episode)."""
+    from ..baselines.mpc import ModelPredictiveController
+    from ..hybrids.policies import FilteredPolicy
+
+    return FilteredPolicy.for_env(ModelPredictiveController.for_env(env), env)
+
+
+def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
+            rng: np.random.Generator | None = None) -> Episode:
+    """One episode of the mixture: the expert's action with probability ``beta``.
+
+    Parameters
+    ----------
+    env : gymnasium.Env
+        A TetherLibration env in ``action_mode="rate"``; reset with ``seed``.
+    seed : int
+        The episode's env seed.
+    expert : object with ``predict`` or None
+        Labels every observation (called on each in order, whoever acts); None: no
+        labels, the student acts alone.
+    student : callable or None
+        ``student(obs) -> action``; None: the expert acts alone.
+    beta : float
+        Probability [-] that a step executes the expert's action (drawn from ``rng``
+        at every step when both act).
+    rng : numpy Generator or None
+        The mixture's draws (needed when both act).
+    """
+    if expert is None and student is None:
+        raise ValueError("rollout needs an expert, a student or both")
+    cfg = env.unwrapped.config
+    per_orbit = cfg.max_episode_steps / cfg.orbits_per_episode
+    obs, _ = env.reset(seed=int(seed))
+    seen: list[np.ndarray] = []
+    labels: list[np.ndarray] = []
+    acted: list[bool] = []
+    sq, count, survived, t = 0.0, 0, True, 0
+    while True:
+        label = None if expert is None else np.asarray(expert.predict(obs)[0], np.float64)
+        if student is None:
+            by_expert = True
+        elif expert is None:
+            by_expert = False
+        else:
+            if rng is None:
+                raise ValueError("a mixture of expert and student needs rng")
+            by_expert = bool(rng.random() < beta)
+        action = label if by_expert else np.asarray(student(obs), np.float64)
+        seen.append(np.asarray(obs, np.float32))
+        if label is not None:
+            labels.append(label)
+        acted.append(by_expert)
+        obs, _, terminated, truncated, info = env.step(action)
+        if t >= per_orbit:
+            err = np.asarray(info["theta"], float) - float(info["theta_ref"])
+            sq += float(np.mean(err**2))
+            count += 1
+        t += 1
+        if terminated:
+            survived = False
+        if terminated or truncated:
+            break
+    rms = math.sqrt(sq / count) if count and survived else None
+    return Episode(np.stack(seen), None if expert is None else np.stack(labels),
+                   np.asarray(acted, bool), survived, rms)
+
+
+# ------------------------------------------------------------------------- student
+def make_student(env, settings: DaggerSettings):
+    """A stable-baselines3 ``ActorCriticPolicy`` (MLP of ``net_arch``, tanh) for ``env``."""
+    import torch
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    torch.manual_seed(settings.seed)
+    policy = ActorCriticPolicy(env.observation_space, env.action_space, lambda _: 0.0,
+                               net_arch={"pi": list(settings.net_arch), "vf": []},
+                               activation_fn=torch.nn.Tanh)
+    policy.set_training_mode(False)
+    return policy
+
+
+def normalization(obs: np.ndarray) -> ObsNormalization:
+    """VecNormalize-style statistics of the dataset's observations (clip 10, eps 1e-8)."""
+    x = np.asarray(obs, dtype=np.float64)
+    return ObsNormalization(x.mean(axis=0), x.var(axis=0), float(len(x)), 10.0, 1e-8)
+
+
+def deterministic_action(policy, obs_normalised):
+    """The policy's deterministic (mean) action, before clipping, as a torch tensor."""
+    features = policy.extract_features(obs_normalised, policy.pi_features_extractor)
+    return policy.action_net(policy.mlp_extractor.forward_actor(features))
+
+
+def fit_student(policy, data: Dataset, norm: ObsNormalization, settings: DaggerSettings,
+                generator) -> float:
+    """Refit on all of ``data``: ``epochs`` passes of Adam on the MSE; the last epoch's loss.
+
+    The loss is the mean over pairs and actions of (a_student - a_expert)^2 with
+    a_student the deterministic action on the normalised observation.
+    """
+    import torch
+
+    x = torch.as_tensor(norm.apply(data.obs))
+    y = torch.as_tensor(data.labels, dtype=torch.float32)
+    params = [p for name, p in policy.named_parameters()
+              if not name.startswith(("value_net", "mlp_extractor.value_net", "log_std"))]
+    opt = torch.optim.Adam(params, lr=settings.learning_rate)
+    bs = min(settings.batch_size, len(x))
+    steps_per_epoch = math.ceil(len(x) / bs)
+    total = settings.epochs * steps_per_epoch
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda k: 0.01 + 0.99 * 0.5 * (1.0 + math.cos(math.pi * min(k, total) / total)))
+    policy.set_training_mode(True)
+    last = math.nan
+    for _ in range(settings.epochs):
+        perm = torch.randperm(len(x), generator=generator)
+        acc, n = 0.0, 0
+        for start in range(0, len(x), bs):
+            idx = perm[start:start + bs]
+            loss = torch.mean((deterministic_action(policy, x[idx]) - y[idx]) ** 2)
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            sched.step()
+            acc += float(loss.detach()) * len(idx)
+            n += len(idx)
+        last = acc / n
+    policy.set_training_mode(False)
+    return last
+
+
+# ---------------------------------------------------------------------------- loop
+def _save(folder: Path, policy, norm, env_kwargs: dict, training: dict) -> None:
+    save_agent(folder, policy, ALGO, norm, env_id=tether_gym.ENV_ID, env_kwargs=env_kwargs,
+               training=training)
+
+
+def train_dagger(settings: DaggerSettings, out, command: str = "",
+                 log: Callable[[str], None] | None = print) -> dict:
+    """Run DAgger with ``mpc`` as the expert; write the run folder ``out``.
+
+    Returns the run's summary (also in ``train_info.json``): labels, wall time [s],
+    labels per second, and the per-iteration records of ``train_log.json``.
+    """
+    import gymnasium as gym
+    import torch
+
+    from tether_gym.envs.config import env_config
+
+    t0 = time.perf_counter()
+    torch.set_num_threads(1)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    env_kwargs = training_env_kwargs(settings.orbits)
+    write_config(out, {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
+                       "hyperparams": {**asdict(settings), "net_arch": list(settings.net_arch)},
+                       "env_kwargs": env_kwargs})
+    if command:
+        append_command(out, command)
+    check_env = gym.make(tether_gym.ENV_ID, **env_kwargs)
+    masses = env_config(check_env).masses
+    rng = np.random.default_rng(settings.seed)
+    check_seeds = [int(s) for s in rng.integers(0, 2**31 - 1, settings.check_episodes)]
+    policy = make_student(check_env, settings)
+    generator = torch.Generator().manual_seed(settings.seed)
+    obs_dim, act_dim = env_config(check_env).obs_dim, env_config(check_env).n_tethers
+    data = Dataset.empty(obs_dim, act_dim)
+    student = None
+    history: list[dict] = []
+    label_time = 0.0
+    number = 0
+    for it in range(settings.iterations):
+        beta = settings.beta_decay ** it
+        t_it = time.perf_counter()
+        label_start = label_time
+        for _ in range(settings.episodes):
+            kwargs = draw_episode(rng, env_kwargs, masses)
+            env_seed = int(rng.integers(0, 2**31 - 1))
+            mix_seed = int(rng.integers(0, 2**31 - 1))
+            mix = np.random.default_rng(mix_seed)
+            env = gym.make(tether_gym.ENV_ID, **kwargs)
+            expert = make_expert(env)  # its first build (~10 s) is not labelling time
+            t_ep = time.perf_counter()
+            episode = rollout(env, env_seed, expert, student, beta, mix)
+            label_time += time.perf_counter() - t_ep
+            data.add(episode, it, number, {
+                "env_seed": env_seed, "eccentricity": env_config(env).eccentricity,
+                "masses": list(env_config(env).masses), "beta": beta,
+                "mixture_seed": mix_seed})
+            env.close()
+            number += 1
+        norm = normalization(data.obs)
+        loss = fit_student(policy, data, norm, settings, generator)
+        agent = TrainedAgent(policy, norm, algo=ALGO)
+        def student(o, agent=agent):
+            return agent.predict(o, deterministic=True)[0]
+        checks = [rollout(check_env, s, student=student) for s in check_seeds]
+        wall = time.perf_counter() - t0
+        rms = [c.tracking_rms for c in checks if c.tracking_rms is not None]
+        record = {"iteration": it, "beta": beta, "episodes": number, "labels": len(data),
+                  "wall_time_s": round(wall, 2),
+                  "iteration_s": round(time.perf_counter() - t_it, 2),
+                  "labels_per_s": round((len(data) - (history[-1]["labels"] if history else 0))
+                                        / max(label_time - label_start, 1e-9), 2),
+                  "expert_acted": float(np.mean(data.expert_acted[data.iteration == it])),
+                  "loss": loss,
+                  "check_survived": float(np.mean([c.survived for c in checks]))
+                  if checks else None,
+                  "check_tracking_rms": float(np.median(rms)) if rms else None}
+        history.append(record)
+        training = {"method": "dagger", "expert": "mpc", "seed": settings.seed,
+                    "command": command, "num_timesteps": len(data), "iteration": it,
+                    "wall_time_s": round(wall, 1)}
+        _save(out / CHECKPOINT_DIR / f"{CHECKPOINT_AGENT_PREFIX}_{len(data)}_steps", policy,
+              norm, env_kwargs, training)
+        if log:
+            log(_progress(record, settings))
+    check_env.close()
+    wall = time.perf_counter() - t0
+    _save(out, policy, norm, env_kwargs, training)
+    data.save(out / DATA_FILE)
+    (out / TRAIN_LOG_FILE).write_text(json.dumps(history, indent=1))
+    summary = {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
+               "seed": settings.seed, "command": command, "status": "finished",
+               "tether_gym": tether_gym.__version__, "torch": torch.__version__,
+               "num_timesteps": len(data), "labels": len(data), "episodes": number,
+               "wall_time_s": round(wall, 1), "label_time_s": round(label_time, 1),
+               "labels_per_s": round(len(data) / max(label_time, 1e-9), 2),
+               "history": history}
+    write_train_info(out, summary)
+    return summary
+
+
+def _progress(r: dict, settings: DaggerSettings) -> str:
+    rms = r["check_tracking_rms"]
+    check = ("" if r["check_survived"] is None else
+             f"; student alone {r['check_survived']:.2f} survived of "
+             f"{settings.check_episodes}, median tracking RMS "
+             + ("n/a" if rms is None else f"{rms:.2e} rad"))
+    return (f"iteration {r['iteration']} (beta {r['beta']:.3g}, expert acted "
+            f"{r['expert_acted']:.2f}): {r['episodes']} episodes, {r['labels']} labels, "
+            f"{r['labels_per_s']:.1f} labels/s, {r['wall_time_s']:.1f} s; "
+            f"loss {r['loss']:.3e}{check}")

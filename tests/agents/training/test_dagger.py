@@ -1,0 +1,217 @@
+"""``train.py distill``: DAgger on mpc's labels (issue 36), checked through the command.
+
+One tiny run (2 iterations x 1 episode of 0.05 orbit) is made in-process with
+``train.py``'s ``main``; its files are checked against the mathematics: every label is
+mpc's action on the recorded observation (a fresh controller replays the episode's
+observations), the mixture executes the actor its draws pick, the saved agent is the
+network on observations normalised with the dataset's statistics, ``evaluate.py`` scores
+the folder, a second run with the same seed writes the same files, and bad arguments
+are refused before any work.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import tether_gym
+from tether_gym_agents.cli.evaluate import main as evaluate_main
+from tether_gym_agents.cli.train import main as train_main
+from tether_gym_agents.files import TrainedAgent
+
+pytest.importorskip("casadi")
+torch = pytest.importorskip("torch")
+load_file = pytest.importorskip("safetensors.torch").load_file
+
+from tether_gym_agents.training import dagger  # noqa: E402
+
+ORBITS = "0.05"
+TINY = ["--iterations", "2", "--episodes", "1", "--epochs", "3", "--orbits", ORBITS,
+        "--check-episodes", "1", "--net-arch", "32", "32"]
+
+
+def _train(out, extra=()):
+    stdout = io.StringIO()
+    with contextlib.redirect_stdout(stdout):
+        code = train_main(["distill", *TINY, *extra, "--out", str(out)])
+    return code, stdout.getvalue()
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("dagger") / "seed_0"
+    code, text = _train(out)
+    assert code == 0, text
+    data = dict(np.load(out / dagger.DATA_FILE))
+    return out, text, data
+
+
+def test_progress_lines_and_files(run):
+    out, text, data = run
+    lines = [line for line in text.splitlines() if line.startswith("iteration ")]
+    assert [line.split()[1] for line in lines] == ["0", "1"]
+    assert "(beta 1, expert acted 1.00)" in lines[0] and "(beta 0.5," in lines[1]
+    log = json.loads((out / dagger.TRAIN_LOG_FILE).read_text())
+    per_iteration = [int(np.sum(data["iteration"] == i)) for i in range(2)]
+    assert [r["labels"] for r in log] == list(np.cumsum(per_iteration))
+    assert f"{log[-1]['labels']} labels" in lines[1] and "labels/s" in lines[1]
+    assert "student alone" in lines[1]
+    for record in log:  # a checkpoint per iteration, its steps = the labels fitted on
+        assert (out / "checkpoints" / f"agent_{record['labels']}_steps" / "agent.json").is_file()
+    info = json.loads((out / "train_info.json").read_text())
+    assert info["labels"] == len(data["obs"]) == log[-1]["labels"]
+    assert "python evaluate.py" in text
+
+
+def test_every_label_is_mpcs_action_on_the_observation(run):
+    """A fresh mpc per episode, called on the recorded observations in order, gives the labels.
+
+    Iteration 1's episode is flown partly by the student: the labels are still mpc's on
+    what the mixture visited.
+    """
+    _, _, data = run
+    base = dagger.training_env_kwargs(float(ORBITS))
+    assert base["action_mode"] == "rate" and "increment_gain" not in base
+    for k in range(len(data["episode_env_seed"])):
+        kwargs = {key: v for key, v in base.items()
+                  if key not in ("eccentricity_range", "mass_range")}
+        kwargs["eccentricity"] = float(data["episode_eccentricity"][k])
+        kwargs["masses"] = tuple(float(m) for m in data["episode_masses"][k])
+        env = gym.make(tether_gym.ENV_ID, **kwargs)
+        expert = dagger.make_expert(env)
+        rows = np.flatnonzero(data["episode"] == k)
+        assert len(rows) > 1
+        again = np.stack([expert.predict(o)[0] for o in data["obs"][rows]])
+        np.testing.assert_array_equal(again, data["labels"][rows])
+        # the first observation is the env's reset with the recorded seed
+        obs, _ = env.reset(seed=int(data["episode_env_seed"][k]))
+        np.testing.assert_array_equal(obs, data["obs"][rows[0]])
+    assert data["expert_acted"][data["iteration"] == 0].all()
+    assert list(data["episode_beta"]) == [1.0, 0.5]
+
+
+class _Recorder(gym.Wrapper):
+    """Keeps the actions the env executed."""
+
+    def __init__(self, env):
+        super().__init__(env)
+        self.actions = []
+
+    def step(self, action):
+        self.actions.append(np.array(action, dtype=float))
+        return self.env.step(action)
+
+
+class _ConstExpert:
+    def __init__(self):
+        self.seen = []
+
+    def predict(self, obs, state=None, episode_start=None, deterministic=True):
+        self.seen.append(np.array(obs))
+        return np.array([0.3, 0.3]), None
+
+
+@pytest.mark.parametrize("beta", [0.0, 0.5, 1.0])
+def test_the_mixture_executes_the_actor_its_draws_pick(beta):
+    kwargs = {**dagger.training_env_kwargs(0.05)}
+    env = _Recorder(gym.make(tether_gym.ENV_ID, **kwargs))
+    expert = _ConstExpert()
+    episode = dagger.rollout(env, 7, expert, lambda o: np.array([-0.2, -0.2]), beta,
+                             np.random.default_rng(3))
+    steps = len(episode.obs)
+    picks = np.random.default_rng(3).random(steps) < beta
+    np.testing.assert_array_equal(episode.expert_acted, picks)
+    executed = np.stack(env.actions)
+    np.testing.assert_array_equal(executed[:, 0], np.where(picks, 0.3, -0.2))
+    # the expert labels every observation, in order, whoever acts
+    assert len(expert.seen) == steps
+    np.testing.assert_array_equal(np.stack(expert.seen), episode.obs)
+    np.testing.assert_array_equal(episode.labels, np.full((steps, 2), 0.3))
+    if beta == 0.5:
+        assert 0 < picks.sum() < steps
+
+
+def test_the_saved_agent_is_the_network_on_normalised_observations(run):
+    out, _, data = run
+    agent = TrainedAgent.load(out)
+    norm = agent.norm
+    obs = data["obs"].astype(np.float64)
+    np.testing.assert_allclose(norm.mean, obs.mean(axis=0), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(norm.var, obs.var(axis=0), rtol=1e-12, atol=1e-18)
+    assert agent.env_kwargs["action_mode"] == "rate"
+    meta = json.loads((out / "agent.json").read_text())
+    assert meta["training"]["method"] == "dagger" and meta["training"]["expert"] == "mpc"
+    x = (data["obs"] - norm.mean) / np.sqrt(norm.var + norm.epsilon)
+    x = np.clip(x, -norm.clip_obs, norm.clip_obs).astype(np.float32)
+    with torch.no_grad():
+        net = dagger.deterministic_action(agent.model, torch.as_tensor(x)).numpy()
+    np.testing.assert_allclose(agent.predict(data["obs"])[0], np.clip(net, -1, 1), atol=1e-5)
+    # the last checkpoint is the final agent
+    last = sorted((out / "checkpoints").iterdir(), key=lambda p: int(p.name.split("_")[1]))[-1]
+    final, checkpoint = (load_file(str(p / "policy.safetensors")) for p in (out, last))
+    assert all(torch.equal(final[k], checkpoint[k]) for k in final)
+
+
+def test_evaluate_scores_the_folder(run, tmp_path):
+    out, _, _ = run
+    with contextlib.redirect_stdout(io.StringIO()):
+        code = evaluate_main([str(out), "--seeds", "1", "--no-plots", "--suite", "paper",
+                              "--env-kwargs", "orbits_per_episode=0.2", "--out", str(tmp_path)])
+    assert code == 0
+    results = json.loads((tmp_path / "results.json").read_text())
+    row = results["policies"][str(out)]
+    assert row["kind"] == "rl" and row["n_episodes"] == 1
+    assert row["env_kwargs"]["action_mode"] == "rate"
+
+
+def test_same_seed_same_run(run, tmp_path):
+    out, _, data = run
+    code, _ = _train(tmp_path / "again")
+    assert code == 0
+    again = dict(np.load(tmp_path / "again" / dagger.DATA_FILE))
+    assert sorted(again) == sorted(data)
+    for key in data:
+        np.testing.assert_array_equal(again[key], data[key])
+    # the weights, tensor by tensor (the file's bytes are not: safetensors writes its
+    # metadata entries in a varying order)
+    first, second = (load_file(str(p / "policy.safetensors")) for p in (out, tmp_path / "again"))
+    assert sorted(first) == sorted(second)
+    for key in first:
+        assert torch.equal(first[key], second[key]), key
+
+
+@pytest.mark.parametrize("argv, named", [
+    (["--iterations", "0"], "--iterations=0: allowed an integer in [1, 100]"),
+    (["--episodes", "-1"], "--episodes=-1"),
+    (["--epochs", "0"], "--epochs=0"),
+    (["--seed", "-3"], "--seed=-3"),
+    (["--orbits", "0"], "--orbits=0.0: allowed a number in [0.01, 100]"),
+    (["--orbits", "nan"], "--orbits=nan"),
+    (["--beta-decay", "1.5"], "--beta-decay=1.5: allowed a number in [0, 1]"),
+    (["--learning-rate", "0"], "--learning-rate=0.0"),
+    (["--net-arch", "0"], "--net-arch=(0,): allowed a tuple of 1 to 8 layer widths"),
+    (["--iterations", "x"], "--iterations: invalid int value: 'x'"),
+])
+def test_bad_arguments_are_refused_before_any_work(argv, named, tmp_path, capsys):
+    out = tmp_path / "never"
+    try:
+        code = train_main(["distill", *argv, "--out", str(out)])
+    except SystemExit as exc:  # argparse's own type errors
+        code = exc.code
+    err = capsys.readouterr().err.strip()
+    assert code == 2
+    assert len(err.splitlines()) == 1 and err.startswith("train.py distill: error:")
+    assert named in err
+    assert not out.exists()
+
+
+def test_out_that_is_a_file_is_refused(tmp_path, capsys):
+    target = tmp_path / "file"
+    target.write_text("x")
+    assert train_main(["distill", "--out", str(target)]) == 2
+    assert "is a file" in capsys.readouterr().err
