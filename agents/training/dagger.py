@@ -162,7 +162,9 @@ class Episode:
     ``obs`` (T, d) float32: the observations acted on; ``labels`` (T, n): the expert's
     action on each (None when not labelled); ``expert_acted`` (T,) bool: whether the
     expert's action was executed; ``survived``: not terminated; ``tracking_rms``
-    [rad]: RMS of theta - theta_d over the steps after orbit 1 (None without such steps).
+    [rad]: RMS of theta - theta_d over the steps after orbit 1 (None without such steps
+    or when terminated); ``final_error`` [rad]: max |theta - theta_d| over the last
+    orbit (None when terminated).
     """
 
     obs: np.ndarray
@@ -170,6 +172,7 @@ class Episode:
     expert_acted: np.ndarray
     survived: bool
     tracking_rms: float | None
+    final_error: float | None = None
 
 
 @dataclass
@@ -291,7 +294,8 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
     seen: list[np.ndarray] = []
     labels: list[np.ndarray] = []
     acted: list[bool] = []
-    sq, count, survived, t = 0.0, 0, True, 0
+    sq, count, survived, t, worst = 0.0, 0, True, 0, 0.0
+    last_orbit = cfg.max_episode_steps - per_orbit
     while True:
         label = None if expert is None else np.asarray(expert.predict(obs)[0], np.float64)
         if student is None:
@@ -308,10 +312,12 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
             labels.append(label)
         acted.append(by_expert)
         obs, _, terminated, truncated, info = env.step(action)
+        err = np.asarray(info["theta"], float) - float(info["theta_ref"])
         if t >= per_orbit:
-            err = np.asarray(info["theta"], float) - float(info["theta_ref"])
             sq += float(np.mean(err**2))
             count += 1
+        if t >= last_orbit:
+            worst = max(worst, float(np.max(np.abs(err))))
         t += 1
         if terminated:
             survived = False
@@ -319,7 +325,7 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
             break
     rms = math.sqrt(sq / count) if count and survived else None
     return Episode(np.stack(seen), None if expert is None else np.stack(labels),
-                   np.asarray(acted, bool), survived, rms)
+                   np.asarray(acted, bool), survived, rms, worst if survived else None)
 
 
 # ------------------------------------------------------------------------- student
@@ -454,6 +460,7 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         checks = [rollout(check_env, s, student=student) for s in check_seeds]
         wall = time.perf_counter() - t0
         rms = [c.tracking_rms for c in checks if c.tracking_rms is not None]
+        final = [c.final_error for c in checks if c.final_error is not None]
         record = {"iteration": it, "beta": beta, "episodes": number, "labels": len(data),
                   "wall_time_s": round(wall, 2),
                   "iteration_s": round(time.perf_counter() - t_it, 2),
@@ -463,7 +470,8 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
                   "loss": loss,
                   "check_survived": float(np.mean([c.survived for c in checks]))
                   if checks else None,
-                  "check_tracking_rms": float(np.median(rms)) if rms else None}
+                  "check_tracking_rms": float(np.median(rms)) if rms else None,
+                  "check_final_error": float(np.median(final)) if final else None}
         history.append(record)
         training = {"method": "dagger", "expert": "mpc", "seed": settings.seed,
                     "command": command, "num_timesteps": len(data), "iteration": it,
@@ -489,11 +497,16 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
 
 
 def _progress(r: dict, settings: DaggerSettings) -> str:
-    rms = r["check_tracking_rms"]
-    check = ("" if r["check_survived"] is None else
-             f"; student alone {r['check_survived']:.2f} survived of "
-             f"{settings.check_episodes}, median tracking RMS "
-             + ("n/a" if rms is None else f"{rms:.2e} rad"))
+    """The iteration's progress line."""
+    def fmt(value, unit=""):
+        return "n/a" if value is None else f"{value:.2e}{unit}"
+
+    check = ""
+    if r["check_survived"] is not None:
+        n = settings.check_episodes
+        check = (f"; student alone: {round(r['check_survived'] * n)}/{n} survived, median "
+                 f"tracking RMS {fmt(r['check_tracking_rms'], ' rad')}, last-orbit max "
+                 f"error {fmt(r['check_final_error'], ' rad')}")
     return (f"iteration {r['iteration']} (beta {r['beta']:.3g}, expert acted "
             f"{r['expert_acted']:.2f}): {r['episodes']} episodes, {r['labels']} labels, "
             f"{r['labels_per_s']:.1f} labels/s, {r['wall_time_s']:.1f} s; "
