@@ -87,10 +87,11 @@ class PPOLagrangian(PPO):
         lambda at the start, >= 0.
     failure_cost : float
         Cost added, for the cost critic only, to a step that terminates the episode
-        (a failure), >= 0. 0 (the default, as the shipped row was trained) leaves a
-        terminated episode costing nothing more, which makes ending it the cheapest way
-        to lower the discounted cost; 1 / (1 - gamma) prices the failure as a state that
-        keeps costing 1 per step. J_c (the multiplier's input) counts the env's costs only.
+        (a failure), >= 0. 0 (the default) leaves a terminated episode costing nothing
+        more, which makes ending it the cheapest way to lower the discounted cost (the
+        first shipped row learned exactly that); 1 / (1 - gamma) prices the failure as a
+        state that keeps costing 1 per step (``configs/ppo_lag.yml``: 200). J_c (the
+        multiplier's input) counts the env's costs only.
     *args, **kwargs
         PPO's.
     """
