@@ -8,7 +8,9 @@ filter, :class:`~tether_gym_agents.hybrids.policies.FilteredPolicy`, as
 
 Iteration i rolls out ``episodes`` episodes of the mixture policy that sends the
 expert's action with probability beta_i = ``beta_decay`` ** i at each step and the
-student's otherwise (iteration 0: the expert alone, beta = 1). The expert labels EVERY
+student's otherwise (iteration 0: the expert alone, beta = 1; with ``mixture="episode"``
+each episode is flown by the expert alone with probability beta_i, else by the student
+alone). The expert labels EVERY
 visited observation: one controller per episode is called on each step's observation
 in order (its warm start follows the trajectory actually flown), whichever action is
 executed. All (observation, expert action) pairs are aggregated over the iterations,
@@ -78,7 +80,7 @@ from .config import CONFIG_DIR, load_hyperparams
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "fit_student",
-           "normalization", "train_dagger", "DATA_FILE", "TRAIN_LOG_FILE", "ALGO"]
+           "normalization", "train_dagger", "DATA_FILE", "TRAIN_LOG_FILE", "ALGO", "MIXTURES"]
 
 DATA_FILE = "dagger_data.npz"
 TRAIN_LOG_FILE = "train_log.json"
@@ -92,6 +94,8 @@ LIMITS: dict[str, tuple[float, float]] = {
     "batch_size": (1, 1_000_000), "learning_rate": (1e-7, 1.0), "check_episodes": (0, 10_000),
 }
 """Valid range (inclusive) of each numeric setting of :class:`DaggerSettings`."""
+MIXTURES = ("step", "episode")
+"""How the mixture of iteration i mixes: per step or per episode (:class:`DaggerSettings`)."""
 _INTEGERS = ("iterations", "episodes", "epochs", "seed", "batch_size", "check_episodes")
 _MAX_WIDTH, _MAX_DEPTH = 4096, 8
 
@@ -121,6 +125,10 @@ class DaggerSettings:
         Adam's minibatch and initial step size.
     check_episodes : int
         Unlabelled episodes the student flies alone after each refit (its report).
+    mixture : str
+        ``"step"``: every step executes the expert's action with probability beta_i;
+        ``"episode"``: every episode is flown by the expert alone with probability
+        beta_i, else by the student alone (the expert labels both).
     """
 
     iterations: int = 5
@@ -133,12 +141,15 @@ class DaggerSettings:
     batch_size: int = 256
     learning_rate: float = 1e-3
     check_episodes: int = 4
+    mixture: str = "step"
 
     def __post_init__(self):
         for f in fields(self):
             value = getattr(self, f.name)
             if f.name in LIMITS and value is not None:
                 _check_number(f.name, value, *LIMITS[f.name], f.name in _INTEGERS)
+        if self.mixture not in MIXTURES:
+            raise ValueError(f"mixture={self.mixture!r}: allowed one of {list(MIXTURES)}")
         arch = self.net_arch
         if not isinstance(arch, tuple) or not 1 <= len(arch) <= _MAX_DEPTH or not all(
                 isinstance(w, int) and not isinstance(w, bool) and 1 <= w <= _MAX_WIDTH
@@ -441,14 +452,17 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
             env_seed = int(rng.integers(0, 2**31 - 1))
             mix_seed = int(rng.integers(0, 2**31 - 1))
             mix = np.random.default_rng(mix_seed)
+            flown = beta
+            if settings.mixture == "episode":  # one actor for the whole episode
+                flown = 1.0 if mix.random() < beta else 0.0
             env = gym.make(tether_gym.ENV_ID, **kwargs)
             expert = make_expert(env)  # its first build (~10 s) is not labelling time
             t_ep = time.perf_counter()
-            episode = rollout(env, env_seed, expert, student, beta, mix)
+            episode = rollout(env, env_seed, expert, student, flown, mix)
             label_time += time.perf_counter() - t_ep
             data.add(episode, it, number, {
                 "env_seed": env_seed, "eccentricity": env_config(env).eccentricity,
-                "masses": list(env_config(env).masses), "beta": beta,
+                "masses": list(env_config(env).masses), "beta": flown,
                 "mixture_seed": mix_seed})
             env.close()
             number += 1

@@ -16,7 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .dagger import LIMITS, DaggerSettings, train_dagger
+from .dagger import LIMITS, MIXTURES, DaggerSettings, train_dagger
 
 __all__ = ["main", "build_parser"]
 
@@ -57,6 +57,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help=f"the mixture executes mpc's action with probability "
                         f"beta_decay**iteration, in {_range('beta_decay')} (default "
                         f"{d.beta_decay})")
+    p.add_argument("--mixture", choices=MIXTURES, default=d.mixture,
+                   help="step: each step executes mpc's action with probability beta; "
+                        "episode: each episode is flown by mpc alone with probability beta, "
+                        f"else by the student alone (default {d.mixture})")
     p.add_argument("--net-arch", type=int, nargs="+", default=list(d.net_arch),
                    metavar="WIDTH", help="hidden layer widths of the tanh MLP (default "
                                          f"{' '.join(map(str, d.net_arch))})")
@@ -82,7 +86,8 @@ def main(argv=None) -> int:
             iterations=args.iterations, episodes=args.episodes, epochs=args.epochs,
             seed=args.seed, orbits=args.orbits, beta_decay=args.beta_decay,
             net_arch=tuple(args.net_arch), batch_size=args.batch_size,
-            learning_rate=args.learning_rate, check_episodes=args.check_episodes)
+            learning_rate=args.learning_rate, check_episodes=args.check_episodes,
+            mixture=args.mixture)
     except ValueError as exc:
         print(f"{PROG}: error: {_flag(str(exc))}", file=sys.stderr)
         return 2

@@ -186,6 +186,21 @@ def test_same_seed_same_run(run, tmp_path):
         assert torch.equal(first[key], second[key]), key
 
 
+def test_the_episode_mixture_gives_each_episode_one_actor(tmp_path):
+    code, text = _train(tmp_path / "episodes", ["--mixture", "episode", "--iterations", "3",
+                                                "--episodes", "3"])
+    assert code == 0, text
+    data = np.load(tmp_path / "episodes" / dagger.DATA_FILE)
+    betas = data["episode_beta"]
+    assert set(betas.tolist()) <= {0.0, 1.0} and betas[:3].tolist() == [1.0] * 3
+    for k, beta in enumerate(betas):  # the recorded actor flew every step of its episode
+        assert (data["expert_acted"][data["episode"] == k] == bool(beta)).all()
+    # the episodes' actors are mpc's with the draws of their mixture seeds
+    later = [np.random.default_rng(int(s)).random() < 0.5 ** (k // 3)
+             for k, s in enumerate(data["episode_mixture_seed"])]
+    assert betas.tolist() == [float(x) for x in later]
+
+
 @pytest.mark.parametrize("argv, named", [
     (["--iterations", "0"], "--iterations=0: allowed an integer in [1, 100]"),
     (["--episodes", "-1"], "--episodes=-1"),
@@ -195,6 +210,7 @@ def test_same_seed_same_run(run, tmp_path):
     (["--orbits", "nan"], "--orbits=nan"),
     (["--beta-decay", "1.5"], "--beta-decay=1.5: allowed a number in [0, 1]"),
     (["--learning-rate", "0"], "--learning-rate=0.0"),
+    (["--mixture", "both"], "--mixture: invalid choice: 'both'"),
     (["--net-arch", "0"], "--net-arch=(0,): allowed a tuple of 1 to 8 layer widths"),
     (["--iterations", "x"], "--iterations: invalid int value: 'x'"),
 ])
