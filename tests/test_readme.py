@@ -90,6 +90,9 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
         "needs a Ray cluster and shared storage",
     "python train.py --algo ppo --sweep sweep.yml --out runs/sweep":
         "a sweep on Ray Tune (tests/agents/training cover sweeps)",
+    "python evaluate.py dataset mpc smc_filtered --episodes 20":
+        "minutes of mpc episodes; tests/agents/evaluation/test_minari_datasets.py builds, "
+        "loads and replays short datasets through the same command",
     "python -m tether_gym_agents.files convert runs/old_run --allow-pickle":
         "runs/old_run stands for a pickled run folder of one's own",
 }
