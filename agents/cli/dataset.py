@@ -27,15 +27,9 @@ from ..evaluation.datasets import (
     require_minari,
 )
 from ..evaluation.registry import resolve_policy
-from ..training.config import CONFIG_DIR, load_hyperparams
+from ..training.config import training_distribution
 
-__all__ = ["add_arguments", "run", "training_env_kwargs"]
-
-
-def training_env_kwargs() -> dict:
-    """``agents/configs/ppo.yml``'s env arguments: the learners' training distribution."""
-    return dict(load_hyperparams(CONFIG_DIR / "ppo.yml", "ppo", tether_gym.ENV_ID)
-                .get("env_kwargs", {}))
+__all__ = ["add_arguments", "run"]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -62,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
         if args.dataset_id is not None and len(args.policies) != 1:
             raise ValueError(f"--dataset-id {args.dataset_id!r} names one dataset; "
                              f"{len(args.policies)} policies given")
-        env_kwargs = (training_env_kwargs() if args.env_kwargs is None
+        env_kwargs = (training_distribution() if args.env_kwargs is None
                       else parse_env_kwargs(args.env_kwargs))
         ids = [args.dataset_id or dataset_id_for(p) for p in args.policies]
         for policy, dataset_id in zip(args.policies, ids, strict=True):

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import gymnasium as gym
 
+import tether_gym
+
 from ..common.algorithms import ALGORITHMS, algorithm, split_name
 from ..common.env_kwargs import parse_env_kwargs as _parse_env_kwargs
 from ..common.features import FeatureSpec
@@ -29,7 +31,7 @@ __all__ = ["ConfigError", "CONFIG_DIR", "RUN_KEYS", "NORMALIZE_KEYS", "SCHEDULE_
            "parse_env_kwargs", "resolve_env_kwargs", "rate_mode_for", "check_env",
            "check_env_id", "algo_class", "check_algo_params", "check_counts", "fit_rollout",
            "NOISE_TYPES", "NOISE_STD_MAX", "action_noise", "MAX_TIMESTEPS",
-           "config_algo"]
+           "config_algo", "training_distribution"]
 
 CONFIG_DIR = Path(__file__).resolve().parents[1] / "configs"
 
@@ -44,6 +46,17 @@ def config_algo(path: str | Path) -> str | None:
     stem = Path(path).stem
     names = [name for name in ALGORITHMS if stem == name or stem.startswith(name + "_")]
     return max(names, key=len) if names else None
+
+
+def training_distribution() -> dict:
+    """``agents/configs/ppo.yml``'s env arguments: the learners' training distribution.
+
+    The shipped PPO agents' (random masses, eccentricity and initial libration,
+    disturbance, observation noise); the Minari datasets and DAgger record and label
+    episodes on it.
+    """
+    return dict(load_hyperparams(CONFIG_DIR / "ppo.yml", "ppo", tether_gym.ENV_ID)
+                .get("env_kwargs") or {})
 
 
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",

@@ -76,7 +76,7 @@ from ..files.run_folder import (
 )
 from ..files.safe_format import ObsNormalization, save_agent
 from ..files.trained import TrainedAgent
-from .config import CONFIG_DIR, load_hyperparams
+from .config import training_distribution
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "fit_student",
@@ -240,9 +240,7 @@ def training_env_kwargs(orbits: float | None = None) -> dict:
     ``increment_gain`` (meaningless in the rate mode) is left out; ``orbits`` sets
     ``orbits_per_episode`` when given.
     """
-    params = load_hyperparams(CONFIG_DIR / "ppo.yml", "ppo", tether_gym.ENV_ID)
-    kwargs = {k: v for k, v in dict(params.get("env_kwargs") or {}).items()
-              if k != "increment_gain"}
+    kwargs = {k: v for k, v in training_distribution().items() if k != "increment_gain"}
     kwargs["action_mode"] = "rate"
     if orbits is not None:
         kwargs["orbits_per_episode"] = float(orbits)
