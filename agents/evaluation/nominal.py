@@ -93,6 +93,17 @@ def residual(agent, env, scenario: Scenario):
     return ResidualPolicy(nominal_smc(env, scenario), agent, spec["scale"], flt)
 
 
+def filtered(agent, env, scenario: Scenario):
+    """``agent`` behind the safety filter of ``smc_filtered`` (on the scenario's nominal model).
+
+    The agent must command reel rates (``action_mode="rate"``), the filter's action.
+    """
+    from ..common.obs import ObservationLayout
+    from ..hybrids.policies import FilteredPolicy
+
+    return FilteredPolicy(agent, nominal_filter(env, scenario), ObservationLayout.from_env(env))
+
+
 def handover(agent, env, scenario: Scenario):
     """``agent`` handing over to SMC, filtered, both on the scenario's nominal model."""
     from ..hybrids.policies import HandoverPolicy

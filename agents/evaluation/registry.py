@@ -9,7 +9,9 @@ A policy name is, in the order tried:
    commanding reel rates, ``action_mode="rate"``) and whatever :func:`register_policy`
    added, in user code or in a plugin package (entry-point group
    :data:`ENTRY_POINT_GROUP`, loaded the first time a name is not found);
-2. ``handover:AGENT`` (e.g. ``handover:ppo``): the hybrid
+2. ``filtered:AGENT`` (e.g. ``filtered:distilled``): a trained agent that commands reel
+   rates, behind the safety filter of ``smc_filtered`` (predicting with the scenario's
+   nominal model); ``handover:AGENT`` (e.g. ``handover:ppo``): the hybrid
    :class:`~tether_gym_agents.hybrids.policies.HandoverPolicy` of a trained agent, which
    steers the transient and hands over to the sliding-mode law inside its boundary
    layer, all of it behind the safety filter;
@@ -50,12 +52,14 @@ from .scenarios import Scenario
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
            "resolve_policy", "make_policy", "default_policies",
            "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
-           "HANDOVER_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
+           "HANDOVER_OF", "FILTERED", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
            "TRAINED_ON_KEYS", "trained_on"]
 
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
 HANDOVER_OF = ("ppo",)
+FILTERED = "filtered:"
+"""Prefix of a filtered agent's policy name: ``filtered:`` + a rate-mode trained agent."""
 """Shipped agents whose handover hybrid ``python evaluate.py`` benchmarks by default."""
 ENTRY_POINT_GROUP = "tether_gym_agents.policies"
 """Entry-point group of plugin packages: each entry names a function that registers the
@@ -312,6 +316,19 @@ def _handover_env_kwargs(name: str, agents: list) -> dict:
     return {**_rate_mode(), **_recorded(name, agents, OBSERVATION_KEYS)}
 
 
+def _filtered_env_kwargs(name: str, agents: list) -> dict:
+    """A filtered agent commands reel rates (trained so) and sees its own observation."""
+    from tether_gym.envs import EnvConfig
+
+    for agent in agents:
+        mode = agent.env_kwargs.get("action_mode", EnvConfig.from_kwargs().action.mode)
+        if mode != RATE_ENV_KWARGS["action_mode"]:
+            raise ValueError(f"policy {name!r}: the safety filter corrects reel-rate commands, "
+                             f"but run {agent.path} was trained with action_mode={mode!r}; "
+                             "only an agent trained with action_mode='rate' can run filtered")
+    return {**_rate_mode(), **_recorded(name, agents, OBSERVATION_KEYS)}
+
+
 def _default_n_bodies() -> int:
     from tether_gym.envs import EnvConfig
 
@@ -400,6 +417,7 @@ class AgentForm:
 ALONE = AgentForm(PolicyKind.RL, False, _alone, _alone_env_kwargs)
 RESIDUAL = AgentForm(PolicyKind.HYBRID, True, nominal.residual, _residual_env_kwargs)
 HANDOVER_FORM = AgentForm(PolicyKind.HYBRID, False, nominal.handover, _handover_env_kwargs)
+FILTERED_FORM = AgentForm(PolicyKind.HYBRID, False, nominal.filtered, _filtered_env_kwargs)
 
 
 @dataclass
@@ -506,7 +524,9 @@ def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:
     if name in _REGISTRY:
         return _registered_spec(name)
     if name.startswith(HANDOVER):
-        return _handover_spec(name, allow_pickle)
+        return _wrapped_spec(name, HANDOVER, HANDOVER_FORM, "a handover hybrid", allow_pickle)
+    if name.startswith(FILTERED):
+        return _wrapped_spec(name, FILTERED, FILTERED_FORM, "a filtered agent", allow_pickle)
     path = _agent_path(name)
     if path is not None:
         return _agent_spec(name, path, allow_pickle)
@@ -532,15 +552,14 @@ def _agent_path(name: str) -> Path | None:
     return path
 
 
-def _handover_spec(name: str, allow_pickle: bool) -> PolicySpec:
-    inner = resolve_policy(name[len(HANDOVER):], allow_pickle=allow_pickle)
+def _wrapped_spec(name: str, prefix: str, form: AgentForm, what: str,
+                  allow_pickle: bool) -> PolicySpec:
+    inner = resolve_policy(name[len(prefix):], allow_pickle=allow_pickle)
     if inner.form is not ALONE:
-        what = "a registered policy" if inner.entry is not None else "a residual"
-        raise ValueError(f"policy {name!r}: a handover hybrid needs a trained agent that "
-                         f"acts alone, {inner.name!r} is {what} of kind "
-                         f"{inner.kind.value!r}")
-    return PolicySpec(name, PolicyKind.HYBRID, inner.runs, form=HANDOVER_FORM,
-                      allow_pickle=allow_pickle)
+        kind = "a registered policy" if inner.entry is not None else "a residual"
+        raise ValueError(f"policy {name!r}: {what} needs a trained agent that acts alone, "
+                         f"{inner.name!r} is {kind} of kind {inner.kind.value!r}")
+    return PolicySpec(name, form.kind, inner.runs, form=form, allow_pickle=allow_pickle)
 
 
 def _agent_spec(name: str, path: Path, allow_pickle: bool) -> PolicySpec:
@@ -564,8 +583,8 @@ def unknown_policy_message(name: str) -> str:
     shown = repr(name) if len(name) <= 200 else f"{name[:60]!r}... ({len(name)} characters)"
     return (f"unknown policy {shown}{hint}; valid: a registered policy "
             f"{', '.join(registered)}; a shipped agent {', '.join(shipped) or '(none)'}; "
-            f"{HANDOVER}<agent> (a shipped agent or a path); or a path to a trained agent "
-            "(run folder, model file or folder of seed_K run folders)")
+            f"{HANDOVER}<agent> or {FILTERED}<agent> (a shipped agent or a path); or a path "
+            "to a trained agent (run folder, model file or folder of seed_K run folders)")
 
 
 def make_policy(name: str, env, scenario: Scenario | None = None, seed: int = 0):

@@ -98,6 +98,16 @@ class _Filtering:
         """Set the counters to zero (e.g. between episodes)."""
         self.loop.reset_counts()
 
+    def project(self, observation, action) -> np.ndarray:
+        """``action`` (desired reel-rate commands) as this policy's filter sends it.
+
+        For one observation (obs_dim,) or a batch (B, obs_dim); unchanged without a
+        filter. Counted like the policy's own commands.
+        """
+        batch, single = self.layout.as_batch(observation)
+        out = self._filter(batch, np.asarray(action, dtype=np.float64).reshape(batch.shape[0], -1))
+        return out[0] if single else out
+
     @property
     def batch_invariant(self) -> bool:
         """True when every part's rows are bitwise independent of the batch.

@@ -67,6 +67,7 @@ import numpy as np
 
 import tether_gym
 
+from ..common.features import FeatureSpec, add_features
 from ..files.run_folder import (
     CHECKPOINT_AGENT_PREFIX,
     CHECKPOINT_DIR,
@@ -89,9 +90,10 @@ ALGO = "ppo"
 ``training.method`` says ``dagger``)."""
 SEED_MAX = 2**31 - 1
 LIMITS: dict[str, tuple[float, float]] = {
-    "iterations": (1, 100), "episodes": (1, 10_000), "epochs": (1, 100_000),
+    "iterations": (0, 100), "episodes": (1, 10_000), "epochs": (1, 100_000),
     "seed": (0, SEED_MAX), "orbits": (0.01, 100.0), "beta_decay": (0.0, 1.0),
     "batch_size": (1, 1_000_000), "learning_rate": (1e-7, 1.0), "check_episodes": (0, 10_000),
+    "expert_noise": (0.0, 2.0), "gate": (0.0, 2.0), "symlog_scale": (1e-9, 10.0),
 }
 """Valid range (inclusive) of each numeric setting of :class:`DaggerSettings`."""
 MIXTURES = ("step", "episode")
@@ -107,7 +109,8 @@ class DaggerSettings:
     Attributes
     ----------
     iterations : int
-        DAgger iterations (iteration 0 is the expert alone).
+        DAgger iterations (iteration 0 is the expert alone); with shared data, the
+        labelled iterations after the fit on it (0: behaviour cloning on it alone).
     episodes : int
         Labelled episodes per iteration.
     epochs : int
@@ -129,6 +132,26 @@ class DaggerSettings:
         ``"step"``: every step executes the expert's action with probability beta_i;
         ``"episode"``: every episode is flown by the expert alone with probability
         beta_i, else by the student alone (the expert labels both).
+    expert_noise : float
+        Standard deviation [-] of the Gaussian noise added to the expert's action when
+        it is executed, before the expert's safety filter (DART, Laskey et al. 2017: the
+        expert's own trajectories are perturbed so that the labels cover the states a
+        slightly wrong student reaches; the label stays the expert's clean action).
+        0: no noise.
+    gate : float or None
+        Intervention threshold [-] (HG-DAgger, Kelly et al. 2019, with mpc as the
+        gatekeeper): once a student's executed action departs from the expert's label
+        by more than ``gate`` (largest component), the expert flies the rest of the
+        episode, so that the data stay near states from which the expert's labels are
+        its smooth law. None: no intervention.
+    drop_failed : bool
+        Leave the pairs of terminated episodes out of the aggregate (their last labels
+        are the expert's saturated, infeasible recoveries).
+    symlog_scale : float or None
+        S [rad]: the student's network also sees symlog(e_i / S) and symlog(e_i' / S)
+        (the ``symlog_errors`` features of ``ppo_symlog``, recorded in ``agent.json``), so
+        that tracking errors far below the first orbit's transient reach it at a usable
+        scale. None: the observation alone.
     """
 
     iterations: int = 5
@@ -142,6 +165,10 @@ class DaggerSettings:
     learning_rate: float = 1e-3
     check_episodes: int = 4
     mixture: str = "step"
+    expert_noise: float = 0.0
+    gate: float | None = None
+    drop_failed: bool = False
+    symlog_scale: float | None = None
 
     def __post_init__(self):
         for f in fields(self):
@@ -223,6 +250,30 @@ class Dataset:
     def __len__(self) -> int:
         return len(self.obs)
 
+    @classmethod
+    def load(cls, path) -> Dataset:
+        """Read a :meth:`save`d ``.npz`` (no pickle)."""
+        with np.load(Path(path), allow_pickle=False) as z:
+            episodes = [{"env_seed": int(z["episode_env_seed"][k]),
+                         "eccentricity": float(z["episode_eccentricity"][k]),
+                         "masses": [float(m) for m in z["episode_masses"][k]],
+                         "beta": float(z["episode_beta"][k]),
+                         "mixture_seed": int(z["episode_mixture_seed"][k])}
+                        for k in range(len(z["episode_env_seed"]))]
+            return cls(z["obs"].astype(np.float32), z["labels"].astype(np.float64),
+                       z["iteration"].astype(np.int32), z["episode"].astype(np.int32),
+                       z["expert_acted"].astype(bool), episodes)
+
+    def extend(self, other: Dataset) -> None:
+        """Append ``other``'s pairs and episodes (its episode numbers shifted after ours)."""
+        shift = len(self.episodes)
+        self.obs = np.concatenate([self.obs, other.obs])
+        self.labels = np.concatenate([self.labels, other.labels])
+        self.iteration = np.concatenate([self.iteration, other.iteration])
+        self.episode = np.concatenate([self.episode, other.episode + shift])
+        self.expert_acted = np.concatenate([self.expert_acted, other.expert_acted])
+        self.episodes.extend(dict(e) for e in other.episodes)
+
     def save(self, path: Path) -> None:
         """Write the arrays as an ``.npz`` (no pickle)."""
         arrays: dict[str, np.ndarray] = {
@@ -275,7 +326,8 @@ def make_expert(env):
 
 
 def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
-            rng: np.random.Generator | None = None) -> Episode:
+            rng: np.random.Generator | None = None, expert_noise: float = 0.0,
+            gate: float | None = None) -> Episode:
     """One episode of the mixture: the expert's action with probability ``beta``.
 
     Parameters
@@ -293,10 +345,20 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
         Probability [-] that a step executes the expert's action (drawn from ``rng``
         at every step when both act).
     rng : numpy Generator or None
-        The mixture's draws (needed when both act).
+        The mixture's draws (needed when both act, or with ``expert_noise``).
+    expert_noise : float
+        Standard deviation [-] of Gaussian noise on the expert's executed action (the
+        label stays clean; the sum is clipped to [-1, 1] and, when the expert has a
+        safety filter, sent through it as the expert's own commands are).
+    gate : float or None
+        Once a student's action departs from the label by more than this (largest
+        component) [-], the expert flies the rest of the episode.
     """
     if expert is None and student is None:
         raise ValueError("rollout needs an expert, a student or both")
+    if expert_noise > 0.0 and rng is None:
+        raise ValueError("expert_noise needs rng")
+    taken_over = False
     cfg = env.unwrapped.config
     per_orbit = cfg.max_episode_steps / cfg.orbits_per_episode
     obs, _ = env.reset(seed=int(seed))
@@ -307,7 +369,7 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
     last_orbit = cfg.max_episode_steps - per_orbit
     while True:
         label = None if expert is None else np.asarray(expert.predict(obs)[0], np.float64)
-        if student is None:
+        if student is None or taken_over:
             by_expert = True
         elif expert is None:
             by_expert = False
@@ -315,7 +377,14 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
             if rng is None:
                 raise ValueError("a mixture of expert and student needs rng")
             by_expert = bool(rng.random() < beta)
-        action = label if by_expert else np.asarray(student(obs), np.float64)
+        if by_expert:
+            action = label
+            if expert_noise > 0.0 and rng is not None:
+                action = _noisy(expert, obs, label + rng.normal(0.0, expert_noise, label.shape))
+        else:
+            action = np.asarray(student(obs), np.float64)
+            if gate is not None and label is not None and np.max(np.abs(action - label)) > gate:
+                taken_over = True  # this step still flies the student's action
         seen.append(np.asarray(obs, np.float32))
         if label is not None:
             labels.append(label)
@@ -337,14 +406,50 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
                    np.asarray(acted, bool), survived, rms, worst if survived else None)
 
 
+def _noisy(expert, obs, desired: np.ndarray) -> np.ndarray:
+    """The expert's perturbed command as it flies.
+
+    Through the expert's own safety filter when it has one (``project``), else clipped
+    to [-1, 1].
+    """
+    project = getattr(expert, "project", None)
+    if project is None:
+        return np.clip(desired, -1.0, 1.0)
+    return np.asarray(project(obs, np.clip(desired, -1.0, 1.0)), np.float64)
+
+
 # ------------------------------------------------------------------------- student
+def student_features(settings: DaggerSettings) -> dict | None:
+    """The ``features`` entry of the student's ``agent.json`` (None: no features)."""
+    if settings.symlog_scale is None:
+        return None
+    return FeatureSpec("symlog_errors", settings.symlog_scale).to_dict()
+
+
+def student_inputs(settings: DaggerSettings, obs: np.ndarray, n_tethers: int) -> np.ndarray:
+    """The network's un-normalised input: ``obs`` followed by the student's features."""
+    spec = student_features(settings)
+    return add_features(None if spec is None else FeatureSpec.from_dict(spec), obs, n_tethers)
+
+
 def make_student(env, settings: DaggerSettings):
-    """A stable-baselines3 ``ActorCriticPolicy`` (MLP of ``net_arch``, tanh) for ``env``."""
+    """A stable-baselines3 ``ActorCriticPolicy`` (MLP of ``net_arch``, tanh) for ``env``.
+
+    Its observation space is the env's, widened by the student's features if any.
+    """
+    import gymnasium as gym
     import torch
     from stable_baselines3.common.policies import ActorCriticPolicy
 
     torch.manual_seed(settings.seed)
-    policy = ActorCriticPolicy(env.observation_space, env.action_space, lambda _: 0.0,
+    space = env.observation_space
+    extra = student_inputs(settings, space.low[None], env.action_space.shape[0]).shape[1] \
+        - space.shape[0]
+    if extra:
+        space = gym.spaces.Box(np.concatenate([space.low, np.full(extra, -np.inf, np.float32)]),
+                               np.concatenate([space.high, np.full(extra, np.inf, np.float32)]),
+                               dtype=np.float32)
+    policy = ActorCriticPolicy(space, env.action_space, lambda _: 0.0,
                                net_arch={"pi": list(settings.net_arch), "vf": []},
                                activation_fn=torch.nn.Tanh)
     policy.set_training_mode(False)
@@ -372,7 +477,8 @@ def fit_student(policy, data: Dataset, norm: ObsNormalization, settings: DaggerS
     """
     import torch
 
-    x = torch.as_tensor(norm.apply(data.obs))
+    n = data.labels.shape[1]
+    x = torch.as_tensor(norm.apply(student_inputs(settings, data.obs, n)))
     y = torch.as_tensor(data.labels, dtype=torch.float32)
     params = [p for name, p in policy.named_parameters()
               if not name.startswith(("value_net", "mlp_extractor.value_net", "log_std"))]
@@ -402,14 +508,20 @@ def fit_student(policy, data: Dataset, norm: ObsNormalization, settings: DaggerS
 
 
 # ---------------------------------------------------------------------------- loop
-def _save(folder: Path, policy, norm, env_kwargs: dict, training: dict) -> None:
+def _save(folder: Path, policy, norm, env_kwargs: dict, training: dict,
+          features: dict | None) -> None:
     save_agent(folder, policy, ALGO, norm, env_id=tether_gym.ENV_ID, env_kwargs=env_kwargs,
-               training=training)
+               training=training, features=features)
 
 
 def train_dagger(settings: DaggerSettings, out, command: str = "",
-                 log: Callable[[str], None] | None = print) -> dict:
+                 log: Callable[[str], None] | None = print,
+                 initial: Dataset | None = None) -> dict:
     """Run DAgger with ``mpc`` as the expert; write the run folder ``out``.
+
+    ``initial``: pairs labelled beforehand (a shared expert dataset, e.g. written by a
+    run with ``iterations=1``); the student is first fitted on them (recorded as
+    iteration 0, no labels spent) and the labelled iterations are 1 .. ``iterations``.
 
     Returns the run's summary (also in ``train_info.json``): labels, wall time [s],
     labels per second, and the per-iteration records of ``train_log.json``.
@@ -419,6 +531,8 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
 
     from tether_gym.envs.config import env_config
 
+    if settings.iterations == 0 and initial is None:
+        raise ValueError("iterations=0: allowed only with shared data to fit on (--data)")
     t0 = time.perf_counter()
     torch.set_num_threads(1)
     out = Path(out)
@@ -441,11 +555,15 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
     history: list[dict] = []
     label_time = 0.0
     number = 0
-    for it in range(settings.iterations):
+    dropped = 0
+    if initial is not None:  # iteration 0 is the fit on the shared data alone
+        data.extend(initial)
+        number = len(data.episodes)
+    for it in range(settings.iterations + (initial is not None)):
         beta = settings.beta_decay ** it
         t_it = time.perf_counter()
         label_start = label_time
-        for _ in range(settings.episodes):
+        for _ in range(0 if initial is not None and it == 0 else settings.episodes):
             kwargs = draw_episode(rng, env_kwargs, masses)
             env_seed = int(rng.integers(0, 2**31 - 1))
             mix_seed = int(rng.integers(0, 2**31 - 1))
@@ -456,17 +574,22 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
             env = gym.make(tether_gym.ENV_ID, **kwargs)
             expert = make_expert(env)  # its first build (~10 s) is not labelling time
             t_ep = time.perf_counter()
-            episode = rollout(env, env_seed, expert, student, flown, mix)
+            episode = rollout(env, env_seed, expert, student, flown, mix,
+                              settings.expert_noise, settings.gate)
             label_time += time.perf_counter() - t_ep
+            if settings.drop_failed and not episode.survived:
+                dropped += len(episode.obs)
+                env.close()
+                continue
             data.add(episode, it, number, {
                 "env_seed": env_seed, "eccentricity": env_config(env).eccentricity,
                 "masses": list(env_config(env).masses), "beta": flown,
                 "mixture_seed": mix_seed})
             env.close()
             number += 1
-        norm = normalization(data.obs)
+        norm = normalization(student_inputs(settings, data.obs, act_dim))
         loss = fit_student(policy, data, norm, settings, generator)
-        agent = TrainedAgent(policy, norm, algo=ALGO)
+        agent = TrainedAgent(policy, norm, algo=ALGO, features=student_features(settings))
         def student(o, agent=agent):
             return agent.predict(o, deterministic=True)[0]
         checks = [rollout(check_env, s, student=student) for s in check_seeds]
@@ -476,9 +599,12 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         record = {"iteration": it, "beta": beta, "episodes": number, "labels": len(data),
                   "wall_time_s": round(wall, 2),
                   "iteration_s": round(time.perf_counter() - t_it, 2),
-                  "labels_per_s": round((len(data) - (history[-1]["labels"] if history else 0))
+                  "labels_per_s": round((len(data) - (history[-1]["labels"] if history
+                                                      else len(initial or ())))
                                         / max(label_time - label_start, 1e-9), 2),
-                  "expert_acted": float(np.mean(data.expert_acted[data.iteration == it])),
+                  "expert_acted": float(np.mean(data.expert_acted[data.iteration == it]))
+                  if np.any(data.iteration == it) else 1.0,
+                  "dropped_labels": dropped,
                   "loss": loss,
                   "check_survived": float(np.mean([c.survived for c in checks]))
                   if checks else None,
@@ -489,12 +615,12 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
                     "command": command, "num_timesteps": len(data), "iteration": it,
                     "wall_time_s": round(wall, 1)}
         _save(out / CHECKPOINT_DIR / f"{CHECKPOINT_AGENT_PREFIX}_{len(data)}_steps", policy,
-              norm, env_kwargs, training)
+              norm, env_kwargs, training, student_features(settings))
         if log:
             log(_progress(record, settings))
     check_env.close()
     wall = time.perf_counter() - t0
-    _save(out, policy, norm, env_kwargs, training)
+    _save(out, policy, norm, env_kwargs, training, student_features(settings))
     data.save(out / DATA_FILE)
     (out / TRAIN_LOG_FILE).write_text(json.dumps(history, indent=1))
     summary = {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,

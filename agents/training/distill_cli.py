@@ -16,7 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .dagger import LIMITS, MIXTURES, DaggerSettings, train_dagger
+from .dagger import DATA_FILE, LIMITS, MIXTURES, DaggerSettings, Dataset, train_dagger
 
 __all__ = ["main", "build_parser"]
 
@@ -72,6 +72,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--check-episodes", type=int, default=d.check_episodes,
                    help=f"unlabelled episodes the student flies alone after each refit, in "
                         f"{_range('check_episodes')} (default {d.check_episodes})")
+    p.add_argument("--expert-noise", type=float, default=d.expert_noise,
+                   help="standard deviation of Gaussian noise on mpc's executed action "
+                        f"(DART; the label stays clean), in {_range('expert_noise')} "
+                        f"(default {d.expert_noise:g})")
+    p.add_argument("--gate", type=float, default=None,
+                   help="HG-DAgger intervention: mpc flies the rest of an episode once the "
+                        "student's action departs from mpc's by more than this, in "
+                        f"{_range('gate')} (default: never)")
+    p.add_argument("--drop-failed", action="store_true",
+                   help="leave the labels of terminated episodes out of the aggregate")
+    p.add_argument("--symlog-scale", type=float, default=None, metavar="S",
+                   help="the student also sees symlog(e/S) and symlog(e'/S) of its tracking "
+                        f"errors (S [rad] in {_range('symlog_scale')}; default: no features)")
+    p.add_argument("--data", type=str, nargs="+", default=None, metavar="NPZ",
+                   help="shared labelled data (dagger_data.npz files of earlier runs) the "
+                        "student is first fitted on; the labelled iterations follow")
     p.add_argument("--out", type=str, default=None,
                    help="run folder (default runs/dagger/seed_<seed>)")
     return p
@@ -87,9 +103,14 @@ def main(argv=None) -> int:
             seed=args.seed, orbits=args.orbits, beta_decay=args.beta_decay,
             net_arch=tuple(args.net_arch), batch_size=args.batch_size,
             learning_rate=args.learning_rate, check_episodes=args.check_episodes,
-            mixture=args.mixture)
+            mixture=args.mixture, expert_noise=args.expert_noise, gate=args.gate,
+            drop_failed=args.drop_failed, symlog_scale=args.symlog_scale)
     except ValueError as exc:
         print(f"{PROG}: error: {_flag(str(exc))}", file=sys.stderr)
+        return 2
+    if settings.iterations == 0 and not args.data:
+        print(f"{PROG}: error: --iterations 0 fits on shared data alone: give --data NPZ",
+              file=sys.stderr)
         return 2
     try:
         import casadi  # noqa: F401  (the expert's solver)
@@ -102,8 +123,20 @@ def main(argv=None) -> int:
         print(f"{PROG}: error: --out {out} is a file; give a new or an existing folder",
               file=sys.stderr)
         return 2
+    initial = None
+    for path in args.data or ():
+        try:
+            part = Dataset.load(path)
+        except (OSError, KeyError, ValueError) as exc:
+            print(f"{PROG}: error: --data {path}: not a readable {DATA_FILE} ({exc})",
+                  file=sys.stderr)
+            return 2
+        if initial is None:
+            initial = part
+        else:
+            initial.extend(part)
     command = shlex.join(["python", "train.py", "distill", *argv])
-    summary = train_dagger(settings, out, command=command)
+    summary = train_dagger(settings, out, command=command, initial=initial)
     print(f"wrote {out}: {summary['labels']} labels in {summary['episodes']} episodes, "
           f"{summary['wall_time_s']:.1f} s ({summary['labels_per_s']:.1f} labels/s); "
           f"score it with: python evaluate.py {shlex.quote(str(out))}")

@@ -202,7 +202,12 @@ def test_the_episode_mixture_gives_each_episode_one_actor(tmp_path):
 
 
 @pytest.mark.parametrize("argv, named", [
-    (["--iterations", "0"], "--iterations=0: allowed an integer in [1, 100]"),
+    (["--iterations", "0"], "--iterations 0 fits on shared data alone: give --data NPZ"),
+    (["--iterations", "101"], "--iterations=101: allowed an integer in [0, 100]"),
+    (["--expert-noise", "-0.1"], "--expert-noise=-0.1: allowed a number in [0, 2]"),
+    (["--gate", "inf"], "--gate=inf: allowed a number in [0, 2]"),
+    (["--symlog-scale", "0"], "--symlog-scale=0.0: allowed a number in [1e-09, 10]"),
+    (["--data", "no_such.npz"], "--data no_such.npz: not a readable dagger_data.npz"),
     (["--episodes", "-1"], "--episodes=-1"),
     (["--epochs", "0"], "--epochs=0"),
     (["--seed", "-3"], "--seed=-3"),
@@ -232,3 +237,106 @@ def test_out_that_is_a_file_is_refused(tmp_path, capsys):
     target.write_text("x")
     assert train_main(["distill", "--out", str(target)]) == 2
     assert "is a file" in capsys.readouterr().err
+
+
+def test_expert_noise_perturbs_the_executed_action_not_the_label():
+    """DART: the env executes clip(label + N(0, sigma)), the data keep the clean label."""
+    env = _Recorder(gym.make(tether_gym.ENV_ID, **dagger.training_env_kwargs(0.05)))
+    episode = dagger.rollout(env, 7, _ConstExpert(), None, 1.0, np.random.default_rng(3),
+                             expert_noise=0.5)
+    draws = np.random.default_rng(3)
+    expected = [np.clip(0.3 + draws.normal(0.0, 0.5, 2), -1, 1) for _ in episode.obs]
+    np.testing.assert_array_equal(np.stack(env.actions), np.stack(expected))
+    assert (np.stack(expected) == 1.0).any()  # the clip is exercised
+    np.testing.assert_array_equal(episode.labels, np.full((len(episode.obs), 2), 0.3))
+    assert episode.expert_acted.all()
+
+
+class _FilteredConstExpert(_ConstExpert):
+    """An expert with a safety filter: ``project`` halves the command it is given."""
+
+    def project(self, obs, action):
+        return 0.5 * np.asarray(action)
+
+
+def test_expert_noise_goes_through_the_experts_filter():
+    env = _Recorder(gym.make(tether_gym.ENV_ID, **dagger.training_env_kwargs(0.05)))
+    episode = dagger.rollout(env, 7, _FilteredConstExpert(), None, 1.0,
+                             np.random.default_rng(3), expert_noise=0.5)
+    draws = np.random.default_rng(3)
+    expected = [0.5 * np.clip(0.3 + draws.normal(0.0, 0.5, 2), -1, 1) for _ in episode.obs]
+    np.testing.assert_array_equal(np.stack(env.actions), np.stack(expected))
+
+
+@pytest.mark.parametrize("gate, taken", [(0.4, True), (0.6, False)])
+def test_the_gate_hands_the_rest_of_the_episode_to_the_expert(gate, taken):
+    """The student's -0.2 departs from the label 0.3 by 0.5: over a gate of 0.4 the
+    expert flies every later step; under a gate of 0.6 the student keeps flying."""
+    env = _Recorder(gym.make(tether_gym.ENV_ID, **dagger.training_env_kwargs(0.05)))
+    episode = dagger.rollout(env, 7, _ConstExpert(), lambda o: np.array([-0.2, -0.2]), 0.0,
+                             np.random.default_rng(3), gate=gate)
+    steps = len(episode.obs)
+    expert_steps = np.arange(steps) > 0 if taken else np.zeros(steps, bool)
+    np.testing.assert_array_equal(episode.expert_acted, expert_steps)
+    np.testing.assert_array_equal(np.stack(env.actions)[:, 0],
+                                  np.where(expert_steps, 0.3, -0.2))
+
+
+def test_shared_data_alone_is_behaviour_cloning_with_features(run, tmp_path):
+    """--data NPZ --iterations 0: one fit on the shared pairs, no label spent; with
+    --symlog-scale the saved agent is the network on the normalised observation and its
+    symlog error features."""
+    out, _, data = run
+    code, text = _train(tmp_path / "bc", ["--data", str(out / dagger.DATA_FILE),
+                                          "--iterations", "0", "--symlog-scale", "1e-4"])
+    assert code == 0, text
+    again = dict(np.load(tmp_path / "bc" / dagger.DATA_FILE))
+    for key in data:
+        np.testing.assert_array_equal(again[key], data[key])
+    log = json.loads((tmp_path / "bc" / dagger.TRAIN_LOG_FILE).read_text())
+    assert [r["labels"] for r in log] == [len(data["obs"])] and log[0]["labels_per_s"] == 0
+    agent = TrainedAgent.load(tmp_path / "bc")
+    assert agent.features is not None and agent.features.scale == 1e-4
+    n = 2
+    sl = tether_gym.envs.layout.OBSERVATION.slices(n)
+    e = data["obs"][:, sl["error"]].astype(np.float64)
+    de = data["obs"][:, sl["derror"]].astype(np.float64)
+    inputs = np.concatenate([data["obs"], np.sign(e) * np.log1p(np.abs(e) / 1e-4),
+                             np.sign(de) * np.log1p(np.abs(de) / 1e-4)], axis=1)
+    norm = agent.norm
+    np.testing.assert_allclose(norm.mean, inputs.mean(axis=0), rtol=1e-6, atol=1e-9)
+    x = np.clip((inputs - norm.mean) / np.sqrt(norm.var + norm.epsilon), -10, 10)
+    with torch.no_grad():
+        net = dagger.deterministic_action(agent.model, torch.as_tensor(x.astype(np.float32)))
+    np.testing.assert_allclose(agent.predict(data["obs"])[0], np.clip(net.numpy(), -1, 1),
+                               atol=1e-5)
+
+
+def test_shared_data_then_labelled_iterations(run, tmp_path, monkeypatch):
+    """After the fit on the shared data (iteration 0) come the labelled iterations; with
+    --drop-failed a terminated episode's pairs are left out and counted."""
+    out, _, data = run
+    real = dagger.rollout
+
+    def first_fails(*args, **kwargs):
+        episode = real(*args, **kwargs)
+        if not calls:
+            episode.survived = False
+        calls.append(len(episode.obs))
+        return episode
+
+    calls: list[int] = []
+    monkeypatch.setattr(dagger, "rollout", first_fails)
+    code, text = _train(tmp_path / "more", ["--data", str(out / dagger.DATA_FILE),
+                                            "--iterations", "1", "--episodes", "2",
+                                            "--drop-failed", "--check-episodes", "0"])
+    assert code == 0, text
+    more = dict(np.load(tmp_path / "more" / dagger.DATA_FILE))
+    shared = len(data["obs"])
+    np.testing.assert_array_equal(more["obs"][:shared], data["obs"])
+    assert len(more["obs"]) == shared + calls[1]
+    assert set(more["iteration"][shared:].tolist()) == {1}
+    assert more["episode"][shared:].min() == data["episode"].max() + 1
+    log = json.loads((tmp_path / "more" / dagger.TRAIN_LOG_FILE).read_text())
+    assert [r["iteration"] for r in log] == [0, 1]
+    assert log[1]["dropped_labels"] == calls[0] and log[1]["beta"] == 0.5
