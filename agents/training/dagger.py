@@ -379,7 +379,7 @@ def rollout(env, seed: int, expert=None, student=None, beta: float = 1.0,
             by_expert = bool(rng.random() < beta)
         if by_expert:
             action = label
-            if expert_noise > 0.0 and rng is not None:
+            if expert_noise > 0.0 and rng is not None and label is not None:
                 action = _noisy(expert, obs, label + rng.normal(0.0, expert_noise, label.shape))
         else:
             action = np.asarray(student(obs), np.float64)
