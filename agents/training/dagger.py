@@ -599,9 +599,9 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         record = {"iteration": it, "beta": beta, "episodes": number, "labels": len(data),
                   "wall_time_s": round(wall, 2),
                   "iteration_s": round(time.perf_counter() - t_it, 2),
-                  "labels_per_s": round((len(data) - (history[-1]["labels"] if history
-                                                      else len(initial or ())))
-                                        / max(label_time - label_start, 1e-9), 2),
+                  "labels_per_s": _rate(len(data) - (history[-1]["labels"] if history
+                                                     else len(initial or ())),
+                                        label_time - label_start),
                   "expert_acted": float(np.mean(data.expert_acted[data.iteration == it]))
                   if np.any(data.iteration == it) else 1.0,
                   "dropped_labels": dropped,
@@ -628,10 +628,20 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
                "tether_gym": tether_gym.__version__, "torch": torch.__version__,
                "num_timesteps": len(data), "labels": len(data), "episodes": number,
                "wall_time_s": round(wall, 1), "label_time_s": round(label_time, 1),
-               "labels_per_s": round(len(data) / max(label_time, 1e-9), 2),
+               "labels_per_s": _rate(len(data) - len(initial or ()), label_time),
                "history": history}
     write_train_info(out, summary)
     return summary
+
+
+def fmt_rate(value: float | None) -> str:
+    """A labelling rate for a progress line."""
+    return "no labelling" if value is None else f"{value:.1f} labels/s"
+
+
+def _rate(labels: int, seconds: float) -> float | None:
+    """Labels per second of labelling time; None when nothing was labelled."""
+    return round(labels / seconds, 2) if labels > 0 and seconds > 0.0 else None
 
 
 def _progress(r: dict, settings: DaggerSettings) -> str:
@@ -647,5 +657,5 @@ def _progress(r: dict, settings: DaggerSettings) -> str:
                  f"error {fmt(r['check_final_error'], ' rad')}")
     return (f"iteration {r['iteration']} (beta {r['beta']:.3g}, expert acted "
             f"{r['expert_acted']:.2f}): {r['episodes']} episodes, {r['labels']} labels, "
-            f"{r['labels_per_s']:.1f} labels/s, {r['wall_time_s']:.1f} s; "
+            f"{fmt_rate(r['labels_per_s'])}, {r['wall_time_s']:.1f} s; "
             f"loss {r['loss']:.3e}{check}")

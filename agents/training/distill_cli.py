@@ -16,7 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .dagger import DATA_FILE, LIMITS, MIXTURES, DaggerSettings, Dataset, train_dagger
+from .dagger import DATA_FILE, LIMITS, MIXTURES, DaggerSettings, Dataset, fmt_rate, train_dagger
 
 __all__ = ["main", "build_parser"]
 
@@ -138,7 +138,7 @@ def main(argv=None) -> int:
     command = shlex.join(["python", "train.py", "distill", *argv])
     summary = train_dagger(settings, out, command=command, initial=initial)
     print(f"wrote {out}: {summary['labels']} labels in {summary['episodes']} episodes, "
-          f"{summary['wall_time_s']:.1f} s ({summary['labels_per_s']:.1f} labels/s); "
+          f"{summary['wall_time_s']:.1f} s ({fmt_rate(summary['labels_per_s'])}); "
           f"score it with: python evaluate.py {shlex.quote(str(out))}")
     return 0
 

@@ -294,7 +294,9 @@ def test_shared_data_alone_is_behaviour_cloning_with_features(run, tmp_path):
     for key in data:
         np.testing.assert_array_equal(again[key], data[key])
     log = json.loads((tmp_path / "bc" / dagger.TRAIN_LOG_FILE).read_text())
-    assert [r["labels"] for r in log] == [len(data["obs"])] and log[0]["labels_per_s"] == 0
+    assert [r["labels"] for r in log] == [len(data["obs"])] and log[0]["labels_per_s"] is None
+    info = json.loads((tmp_path / "bc" / "train_info.json").read_text())
+    assert info["labels_per_s"] is None and "no labelling" in text
     agent = TrainedAgent.load(tmp_path / "bc")
     assert agent.features is not None and agent.features.scale == 1e-4
     n = 2
