@@ -36,6 +36,7 @@ from ..files.run_folder import (
 )
 from .config import action_noise, algo_class, with_schedules
 from .settings import TrainSettings
+from .warm_start import INIT_KEY, init_path, warm_start
 
 __all__ = ["RunSummary", "train", "make_venv", "evaluate_command"]
 
@@ -220,7 +221,13 @@ def _model(settings: TrainSettings):
         return _resumed_model(settings, venv, eval_env)
     if settings.normalize is not False:
         venv, eval_env = _normalized(settings, venv, eval_env)
-    return _new_model(settings, venv), venv, eval_env
+    model = _new_model(settings, venv)
+    init = init_path(settings.run)
+    if init is not None:
+        agent = warm_start(model, venv, init)
+        print(f"  actor and observation statistics from {agent.path} ({INIT_KEY}); critic "
+              "and exploration noise new")
+    return model, venv, eval_env
 
 
 def _normalized(settings: TrainSettings, venv, eval_env):

@@ -55,6 +55,7 @@ from .config import (
     resolve_env_kwargs,
 )
 from .hyperparams import check_n_envs, check_rollout
+from .warm_start import INIT_KEY, check_init_policy
 
 __all__ = ["ALGOS", "SEED_MAX", "ConfigError", "TrainOptions", "TrainSettings",
            "resolve_settings", "check_ray_address", "RAY_ADDRESS_FORMS"]
@@ -349,6 +350,9 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
                           f"its observation), got {options.env_id!r}")
     env_kwargs = rate_mode_for(residual, env_kwargs, source, notes)
     check_env(options.env_id, env_kwargs, list(options.env_kwargs), source)
+    if INIT_KEY in run and not options.resume:  # a resumed run starts from its checkpoint
+        check_init_policy(run[INIT_KEY], source, options.algo, features, env_kwargs,
+                          run.get("normalize", False))
 
     def pick(given, key, default):
         return given if given is not None else int(run.get(key, default))

@@ -1,0 +1,162 @@
+"""A new PPO run whose actor starts from a trained agent (``init_policy``; fine-tuning).
+
+The config key ``init_policy: PATH`` names a safe agent (``agent.json`` +
+``policy.safetensors``, or a run folder holding one), e.g. a ``train.py distill``
+student. Before the first rollout the new model's actor (``mlp_extractor.policy_net``
+and ``action_net``) takes the agent's weights, and the training env's observation
+statistics (``VecNormalize.obs_rms``) take the agent's, so the first rollout's
+deterministic action equals the agent's. The critic, the exploration noise
+(``log_std_init``) and the reward statistics start new: the agent was fitted without a
+value or a log-std (DAgger regresses the mean action only).
+
+Everything that would make the copied actor see other inputs or act in other units is
+refused before the run folder is written: another algorithm than an on-policy
+actor-critic (PPO, PPO-Lagrangian) or a non-PPO agent, an agent of a residual hybrid,
+other input features, another ``action_mode`` (rate vs increment), an observation
+normalisation in one of the two and not in the other, and (when the model is built)
+another layer layout or activation. A resumed run ignores the key: its weights come
+from its own checkpoint.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tether_gym.envs.actions import INCREMENT
+
+from ..files.safe_format import AgentLoadError
+from ..files.trained import TrainedAgent
+from .config import ConfigError
+
+__all__ = ["INIT_KEY", "ACTOR_MODULES", "check_init_policy", "warm_start", "init_path"]
+
+INIT_KEY = "init_policy"
+"""The config key (one of :data:`~.config.RUN_KEYS`)."""
+
+ACTOR_MODULES = ("mlp_extractor.policy_net", "action_net")
+"""The submodules of an ``ActorCriticPolicy`` copied from the agent (the actor)."""
+
+_ON_POLICY = ("ppo", "ppo_lag")
+
+
+def _load(path, source: str) -> TrainedAgent:
+    try:
+        return TrainedAgent.load(path)  # safe files only: no pickle is ever opened here
+    except AgentLoadError as exc:
+        raise ConfigError(f"{source}: {INIT_KEY} {str(path)!r}: {exc}") from None
+
+
+def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
+                      normalize) -> str:
+    """Validate ``init_policy`` against the run; its path as given.
+
+    Parameters
+    ----------
+    value : object
+        The config's value (a path string).
+    source : str
+        The config file, for messages.
+    algo : str
+        The run's algorithm.
+    features : FeatureSpec or None
+        The run's input features.
+    env_kwargs : dict
+        The run's resolved env kwargs (``action_mode``).
+    normalize : bool or dict
+        The config's ``normalize``.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key, the value and what does not fit.
+    """
+    if not isinstance(value, str) or not value.strip():
+        raise ConfigError(f"{source}: {INIT_KEY} {value!r}: must be the path of a trained "
+                          "agent (a folder with agent.json, e.g. a train.py distill run)")
+    if algo not in _ON_POLICY:
+        raise ConfigError(f"{source}: {INIT_KEY} starts an on-policy actor-critic's actor; "
+                          f"--algo {algo} is not one of {list(_ON_POLICY)}")
+    agent = _load(value, source)
+    what = f"{source}: {INIT_KEY} {value!r}"
+    if agent.algo != "ppo":
+        raise ConfigError(f"{what}: a {agent.algo} agent; only a ppo agent's actor "
+                          "(ActorCriticPolicy) can start the run")
+    if agent.hybrid is not None:
+        raise ConfigError(f"{what}: the residual of a hybrid ({agent.hybrid}); give an agent "
+                          "that acts alone")
+    if agent.features != features:
+        raise ConfigError(f"{what}: its input features {agent.features} differ from the "
+                          f"run's {features} (set the config's features to the agent's)")
+    mine = env_kwargs.get("action_mode", INCREMENT)
+    theirs = agent.env_kwargs.get("action_mode", INCREMENT)
+    if mine != theirs:
+        raise ConfigError(f"{what}: trained with action_mode={theirs!r}, the run has "
+                          f"{mine!r} (set env_kwargs.action_mode: {theirs})")
+    norm_obs = normalize is True or (isinstance(normalize, dict)
+                                     and normalize.get("norm_obs", True))
+    if (agent.norm is not None) != bool(norm_obs):
+        have = "normalises" if agent.norm is not None else "does not normalise"
+        raise ConfigError(f"{what}: the agent {have} its observations, the run's normalize "
+                          f"is {normalize!r}; they must agree")
+    return value
+
+
+def warm_start(model, venv, path) -> TrainedAgent:
+    """Copy the agent at ``path``'s actor and observation statistics into a new model.
+
+    Parameters
+    ----------
+    model : stable_baselines3 PPO
+        The new model (its ``policy`` an ``ActorCriticPolicy``).
+    venv : VecEnv
+        Its training env: a ``VecNormalize`` whose ``obs_rms`` takes the agent's
+        statistics when the agent has them.
+    path : path-like
+        The agent (checked by :func:`check_init_policy`).
+
+    Returns
+    -------
+    TrainedAgent
+        The agent the weights came from.
+
+    Raises
+    ------
+    ConfigError
+        If a copied layer's shape, the activation or the normalisation's clip differs.
+    """
+    import torch
+
+    agent = _load(path, INIT_KEY)
+    what = f"{INIT_KEY} {str(path)!r}"
+    theirs, mine = agent.model, model.policy
+    if theirs.activation_fn is not mine.activation_fn:
+        raise ConfigError(f"{what}: activation {theirs.activation_fn.__name__}, the run's "
+                          f"policy_kwargs give {mine.activation_fn.__name__}")
+    for name in ACTOR_MODULES:
+        src, dst = theirs.get_submodule(name).state_dict(), mine.get_submodule(name)
+        shapes = {k: tuple(v.shape) for k, v in src.items()}
+        want = {k: tuple(v.shape) for k, v in dst.state_dict().items()}
+        if shapes != want:
+            raise ConfigError(f"{what}: its {name} has layers {shapes}, the run's policy "
+                              f"{want} (set policy_kwargs.net_arch.pi to the agent's widths)")
+        with torch.no_grad():
+            dst.load_state_dict(src, strict=True)
+    if agent.norm is not None:
+        rms = venv.obs_rms
+        if rms.mean.shape != agent.norm.mean.shape:
+            raise ConfigError(f"{what}: {agent.norm.mean.shape[0]} normalised inputs, the "
+                              f"run has {rms.mean.shape[0]}")
+        for key in ("clip_obs", "epsilon"):
+            if float(getattr(venv, key)) != float(getattr(agent.norm, key)):
+                raise ConfigError(f"{what}: {key} {getattr(agent.norm, key)}, the run's "
+                                  f"normalize gives {getattr(venv, key)}")
+        rms.mean = agent.norm.mean.astype(float).copy()
+        rms.var = agent.norm.var.astype(float).copy()
+        rms.count = float(agent.norm.count)
+    return agent
+
+
+def init_path(run: dict) -> Path | None:
+    """The run's ``init_policy`` as a path (None when the config has none)."""
+    value = run.get(INIT_KEY)
+    return None if value is None else Path(value)
