@@ -61,7 +61,7 @@ def training_distribution() -> dict:
 
 RUN_KEYS = ("policy", "n_envs", "n_timesteps", "normalize", "env_kwargs", "eval_freq",
             "checkpoint_freq", "residual", "features", "noise_type", "noise_std",
-            "init_policy")
+            "init_policy", "bc_term")
 NOISE_TYPES = ("normal", "ornstein-uhlenbeck")
 """``noise_type`` values (rl-baselines3-zoo's names): Gaussian or Ornstein-Uhlenbeck noise
 of standard deviation ``noise_std`` on every action entry, in the policy's action box

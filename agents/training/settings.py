@@ -37,6 +37,7 @@ from ..files.run_folder import (
 )
 from ..files.safe_format import ALGOS
 from ..hybrids.residual_spec import ResidualSpec
+from .bc_term import BC_KEY, bc_term_spec
 from .config import (
     CONFIG_DIR,
     MAX_TIMESTEPS,
@@ -353,6 +354,9 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
     if INIT_KEY in run and not options.resume:  # a resumed run starts from its checkpoint
         check_init_policy(run[INIT_KEY], source, options.algo, features, env_kwargs,
                           run.get("normalize", False))
+    bc_term = bc_term_spec(run.get(BC_KEY), source, options.algo)
+    if bc_term is not None:
+        run[BC_KEY] = bc_term.to_dict()
 
     def pick(given, key, default):
         return given if given is not None else int(run.get(key, default))
