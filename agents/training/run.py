@@ -37,7 +37,7 @@ from ..files.run_folder import (
 from .bc_term import BC_KEY, BCTermCallback, bc_term_spec
 from .config import action_noise, algo_class, with_schedules
 from .settings import TrainSettings
-from .warm_start import INIT_KEY, init_path, warm_start
+from .warm_start import INIT_KEY, freeze_obs_stats, init_path, warm_start
 
 __all__ = ["RunSummary", "train", "make_venv", "evaluate_command"]
 
@@ -220,16 +220,19 @@ def _model(settings: TrainSettings):
     if settings.residual is not None:
         print(f"  residual hybrid: {json.dumps(settings.residual.to_dict())}: the agent learns "
               "a in u = filter(clip(u_smc + scale * a, -1, 1))")
-    if settings.resume:
-        return _resumed_model(settings, venv, eval_env)
-    if settings.normalize is not False:
-        venv, eval_env = _normalized(settings, venv, eval_env)
-    model = _new_model(settings, venv)
     init = init_path(settings.run)
-    if init is not None:
-        agent = warm_start(model, venv, init)
-        print(f"  actor and observation statistics from {agent.path} ({INIT_KEY}); critic "
-              "and exploration noise new")
+    if settings.resume:
+        model, venv, eval_env = _resumed_model(settings, venv, eval_env)
+    else:
+        if settings.normalize is not False:
+            venv, eval_env = _normalized(settings, venv, eval_env)
+        model = _new_model(settings, venv)
+        if init is not None:
+            agent = warm_start(model, venv, init)
+            print(f"  actor and observation statistics from {agent.path} ({INIT_KEY}), the "
+                  "statistics fixed; critic and exploration noise new")
+    if init is not None:  # a resumed run's too: they are the agent's, saved with the run
+        freeze_obs_stats(model.get_env())
     return model, venv, eval_env
 
 

@@ -138,9 +138,17 @@ def test_train_py_records_the_key_and_resumes_without_the_agent(tmp_path):
     assert recorded["hyperparams"]["init_policy"] == str(agent)
     info = json.loads((out / "train_info.json").read_text())
     assert info["num_timesteps"] == 64
+    student = TrainedAgent.load(agent).norm
+    # the statistics stayed the agent's through the rollouts (they are fixed)
+    trained = TrainedAgent.load(out / "final_agent").norm
+    np.testing.assert_array_equal(trained.mean, student.mean)
+    np.testing.assert_array_equal(trained.var, student.var)
     for f in agent.iterdir():  # a resumed run starts from its own checkpoint
         f.unlink()
     agent.rmdir()
     assert train_main(["--out", str(out), "--resume", "--timesteps", "64", "--no-progress",
                        "--eval-episodes", "1"]) == 0
     assert json.loads((out / "train_info.json").read_text())["num_timesteps"] == 128
+    resumed = TrainedAgent.load(out / "final_agent").norm  # and through the resumed ones
+    np.testing.assert_array_equal(resumed.mean, student.mean)
+    np.testing.assert_array_equal(resumed.var, student.var)
