@@ -1,0 +1,34 @@
+#!/bin/bash
+# Behaviour cloning on the shared mpc dataset (docs/distillation.md, "Behaviour cloning
+# on two million labels"): the fits and their default-suite scores, one training seed.
+# Needs runs/distill_data/ from experiments/issue36/make_data.sh.
+# usage: experiments/issue36/bc.sh NAME   (plain | a_symlog | all_symlog | a_symlog_wide | a_symlog_dagger)
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+parts() {  # the parts of set A (even k), B (odd k) or both
+  for d in runs/distill_data/part_*/; do
+    k=${d#runs/distill_data/part_}; k=${k%/}
+    [ -f "$d/dagger_data.npz" ] || continue
+    case $1 in
+      A) ((k % 2 == 0)) && echo "$d/dagger_data.npz" ;;
+      B) ((k % 2 == 1)) && echo "$d/dagger_data.npz" ;;
+      AB) echo "$d/dagger_data.npz" ;;
+    esac
+  done
+}
+fit=(--iterations 0 --epochs 40 --batch-size 2048 --check-episodes 0 --seed 0)
+case $1 in
+  plain) args=(--data $(parts AB) "${fit[@]}") ;;
+  a_symlog) args=(--data $(parts A) "${fit[@]}" --symlog-scale 1e-4) ;;
+  all_symlog) args=(--data $(parts AB) "${fit[@]}" --symlog-scale 1e-4) ;;
+  a_symlog_wide) args=(--data $(parts A) --iterations 0 --epochs 80 --batch-size 2048
+                       --check-episodes 0 --seed 0 --symlog-scale 1e-4 --net-arch 512 512) ;;
+  a_symlog_dagger) args=(--data $(parts A) --iterations 2 --episodes 10 --beta-decay 0
+                         --gate 0.1 --drop-failed --epochs 40 --batch-size 2048
+                         --check-episodes 0 --seed 0 --symlog-scale 1e-4) ;;
+  *) echo "unknown fit $1" >&2; exit 2 ;;
+esac
+python train.py distill "${args[@]}" --out "runs/bc/$1"
+python evaluate.py "runs/bc/$1" "filtered:runs/bc/$1" --seeds 3 --no-plots \
+  --out "runs/bc_eval/$1"
