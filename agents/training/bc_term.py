@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from ..common.features import add_features
+from ..common.jsonio import checked_mapping
 from .config import ConfigError
 
 __all__ = ["BC_KEY", "BCTermSpec", "bc_term_spec", "BCTermCallback", "load_pairs"]
@@ -86,12 +87,10 @@ def bc_term_spec(value, source: str, algo: str) -> BCTermSpec | None:
     if value is None:
         return None
     what = f"{source}: {BC_KEY}"
-    if not isinstance(value, dict):
-        raise ConfigError(f"{what}: {value!r} must be a mapping with keys {list(BCTermSpec.KEYS)}")
-    unknown = sorted(set(value) - set(BCTermSpec.KEYS))
-    if unknown:
-        raise ConfigError(f"{what}: unknown key(s) {unknown}; valid keys: "
-                          f"{list(BCTermSpec.KEYS)}")
+    try:
+        checked_mapping(value, BCTermSpec.KEYS, what)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
     if algo not in ("ppo", "ppo_lag"):
         raise ConfigError(f"{what}: the term steps an ActorCriticPolicy's actor; --algo {algo} "
                           "is not ppo or ppo_lag")
@@ -192,7 +191,6 @@ class BCTermCallback(_callback_base()):  # type: ignore[misc]
         self.labels = np.zeros((0, 0), np.float32)
         self.optimizer: Any = None
         self._params: list = []
-        self.phases = 0
 
     def _on_training_start(self) -> None:
         import torch
@@ -232,7 +230,6 @@ class BCTermCallback(_callback_base()):  # type: ignore[misc]
             self.optimizer.step()
             losses.append(float(loss.detach()))
         policy.set_training_mode(False)
-        self.phases += 1
         self.logger.record("train/bc_loss", float(np.mean(losses)))
 
     def _on_step(self) -> bool:

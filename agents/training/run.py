@@ -34,7 +34,7 @@ from ..files.run_folder import (
     write_args,
     write_config,
 )
-from .bc_term import BC_KEY, BCTermCallback, bc_term_spec
+from .bc_term import BCTermCallback
 from .config import action_noise, algo_class, with_schedules
 from .settings import TrainSettings
 from .warm_start import INIT_KEY, freeze_obs_stats, init_path, warm_start
@@ -138,8 +138,8 @@ def train(settings: TrainSettings) -> RunSummary:
     if settings.resume:  # the learning curve continues, not restarts
         _continue_curve(callbacks.evaluator, out, int(model.num_timesteps))
     t0 = time.perf_counter()
-    bc_term = bc_term_spec(settings.run.get(BC_KEY), settings.source, settings.algo)
-    extra = [] if bc_term is None else [BCTermCallback(bc_term, settings.features, settings.seed)]
+    extra = ([] if settings.bc_term is None
+             else [BCTermCallback(settings.bc_term, settings.features, settings.seed)])
     model.learn(settings.timesteps, callback=[*callbacks, *extra],
                 progress_bar=not settings.options.no_progress,
                 reset_num_timesteps=not settings.resume, tb_log_name=settings.algo)

@@ -37,7 +37,7 @@ from ..files.run_folder import (
 )
 from ..files.safe_format import ALGOS
 from ..hybrids.residual_spec import ResidualSpec
-from .bc_term import BC_KEY, bc_term_spec
+from .bc_term import BC_KEY, BCTermSpec, bc_term_spec
 from .config import (
     CONFIG_DIR,
     MAX_TIMESTEPS,
@@ -221,6 +221,8 @@ class TrainSettings:
         The hybrid whose residual is trained (None: a policy that acts alone).
     features : FeatureSpec or None
         Input features appended to the policy's observation.
+    bc_term : BCTermSpec or None
+        Supervised steps on stored mpc labels between PPO's updates (None: none).
     n_envs, timesteps, eval_freq, checkpoint_freq : int
         Parallel envs, env steps to train in this call, env steps between evaluations
         and between checkpoints [-].
@@ -239,6 +241,7 @@ class TrainSettings:
     env_kwargs: dict[str, Any]
     residual: ResidualSpec | None
     features: FeatureSpec | None
+    bc_term: BCTermSpec | None
     n_envs: int
     timesteps: int
     eval_freq: int
@@ -355,8 +358,6 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
         check_init_policy(run[INIT_KEY], source, options.algo, features, env_kwargs,
                           run.get("normalize", False))
     bc_term = bc_term_spec(run.get(BC_KEY), source, options.algo)
-    if bc_term is not None:
-        run[BC_KEY] = bc_term.to_dict()
 
     def pick(given, key, default):
         return given if given is not None else int(run.get(key, default))
@@ -375,8 +376,11 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
         run["residual"] = residual.to_dict()
     if features is not None:
         run["features"] = features.to_dict()
+    if bc_term is not None:
+        run[BC_KEY] = bc_term.to_dict()
     return TrainSettings(options=options, out=out, hyperparams=params, run=run,
                          env_kwargs=env_kwargs, residual=residual, features=features,
+                         bc_term=bc_term,
                          **counts, source=source, notes=tuple(notes),
                          command=options.argv() if command is None else tuple(command))
 
