@@ -355,8 +355,9 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
     env_kwargs = rate_mode_for(residual, env_kwargs, source, notes)
     check_env(options.env_id, env_kwargs, list(options.env_kwargs), source)
     if INIT_KEY in run and not options.resume:  # a resumed run starts from its checkpoint
-        check_init_policy(run[INIT_KEY], source, options.algo, features, env_kwargs,
-                          run.get("normalize", False))
+        run[INIT_KEY] = check_init_policy(run[INIT_KEY], source, options.algo, features,
+                                          env_kwargs, run.get("normalize", False),
+                                          options.seed)
     bc_term = bc_term_spec(run.get(BC_KEY), source, options.algo)
 
     def pick(given, key, default):

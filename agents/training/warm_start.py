@@ -2,8 +2,13 @@
 
 The config key ``init_policy: PATH`` names a safe agent (``agent.json`` +
 ``policy.safetensors``, or a run folder holding one), e.g. a ``train.py distill``
-student. Before the first rollout the new model's actor (``mlp_extractor.policy_net``
-and ``action_net``) takes the agent's weights, and the training env's observation
+student, or a shipped one by name (``distill_bc/seed_0``: a folder of
+``agents/pretrained/``). ``{seed}`` in the value stands for the run's training seed, so
+that one config fine-tunes each seed's own student (``init_policy:
+distill_bc/seed_{seed}``; :func:`init_policy_for`).
+
+Before the first rollout the new model's actor (``mlp_extractor.policy_net`` and
+``action_net``) takes the agent's weights, and the training env's observation
 statistics (``VecNormalize.obs_rms``) take the agent's, so the first rollout's
 deterministic action equals the agent's. The observation statistics then stay fixed for
 the whole run (:func:`freeze_obs_stats`, a resumed run too): the actor was fitted on
@@ -30,14 +35,17 @@ from pathlib import Path
 from tether_gym.envs.actions import INCREMENT
 
 from ..files.safe_format import AgentLoadError
-from ..files.trained import TrainedAgent
+from ..files.trained import TrainedAgent, pretrained_agents
 from .config import ConfigError
 
-__all__ = ["INIT_KEY", "ACTOR_MODULES", "check_init_policy", "warm_start", "init_path",
-           "freeze_obs_stats", "FrozenRunningMeanStd"]
+__all__ = ["INIT_KEY", "SEED_FIELD", "ACTOR_MODULES", "check_init_policy", "init_policy_for",
+           "agent_location", "warm_start", "init_path", "freeze_obs_stats",
+           "FrozenRunningMeanStd"]
 
 INIT_KEY = "init_policy"
 """The config key (one of :data:`~.config.RUN_KEYS`)."""
+SEED_FIELD = "{seed}"
+"""What :func:`init_policy_for` replaces by the run's training seed."""
 
 ACTOR_MODULES = ("mlp_extractor.policy_net", "action_net")
 """The submodules of an ``ActorCriticPolicy`` copied from the agent (the actor)."""
@@ -45,21 +53,42 @@ ACTOR_MODULES = ("mlp_extractor.policy_net", "action_net")
 _ON_POLICY = ("ppo", "ppo_lag")
 
 
+def init_policy_for(value: str, seed: int) -> str:
+    """``value`` with every ``{seed}`` replaced by ``seed`` (no other formatting)."""
+    return value.replace(SEED_FIELD, str(int(seed)))
+
+
+def agent_location(value) -> Path:
+    """Where ``init_policy``'s agent is.
+
+    The path as given when it exists, else, when its first part names a shipped agent
+    (``distill_bc/seed_0``), that folder of ``agents/pretrained/``; else the path as given
+    (loading it then says what is missing).
+    """
+    path = Path(value)
+    if path.exists() or path.is_absolute() or not path.parts:
+        return path
+    shipped = pretrained_agents().get(path.parts[0])
+    return path if shipped is None else shipped.joinpath(*path.parts[1:])
+
+
 def _load(path, source: str) -> TrainedAgent:
     try:
-        return TrainedAgent.load(path)  # safe files only: no pickle is ever opened here
+        # safe files only: no pickle is ever opened here
+        return TrainedAgent.load(agent_location(path))
     except AgentLoadError as exc:
         raise ConfigError(f"{source}: {INIT_KEY} {str(path)!r}: {exc}") from None
 
 
 def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
-                      normalize) -> str:
-    """Validate ``init_policy`` against the run; its path as given.
+                      normalize, seed: int = 0) -> str:
+    """Validate ``init_policy`` against the run; its value for this seed.
 
     Parameters
     ----------
     value : object
-        The config's value (a path string).
+        The config's value (a path string, or a shipped agent's name and seed folder;
+        ``{seed}`` stands for ``seed``).
     source : str
         The config file, for messages.
     algo : str
@@ -70,6 +99,13 @@ def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
         The run's resolved env kwargs (``action_mode``).
     normalize : bool or dict
         The config's ``normalize``.
+    seed : int
+        The run's training seed.
+
+    Returns
+    -------
+    str
+        ``value`` with ``{seed}`` replaced (:func:`init_policy_for`), as the run records it.
 
     Raises
     ------
@@ -82,6 +118,7 @@ def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
     if algo not in _ON_POLICY:
         raise ConfigError(f"{source}: {INIT_KEY} starts an on-policy actor-critic's actor; "
                           f"--algo {algo} is not one of {list(_ON_POLICY)}")
+    value = init_policy_for(value, seed)
     agent = _load(value, source)
     what = f"{source}: {INIT_KEY} {value!r}"
     if agent.algo != "ppo":
@@ -165,7 +202,7 @@ def warm_start(model, venv, path) -> TrainedAgent:
 def init_path(run: dict) -> Path | None:
     """The run's ``init_policy`` as a path (None when the config has none)."""
     value = run.get(INIT_KEY)
-    return None if value is None else Path(value)
+    return None if value is None else agent_location(value)
 
 
 def _running_mean_std():

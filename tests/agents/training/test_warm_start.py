@@ -152,3 +152,31 @@ def test_train_py_records_the_key_and_resumes_without_the_agent(tmp_path):
     resumed = TrainedAgent.load(out / "final_agent").norm  # and through the resumed ones
     np.testing.assert_array_equal(resumed.mean, student.mean)
     np.testing.assert_array_equal(resumed.var, student.var)
+
+
+def test_seed_field_picks_each_seeds_own_agent(tmp_path, monkeypatch):
+    """``{seed}`` stands for the run's training seed; a shipped agent's name is found in
+    ``agents/pretrained/`` (what ``agents/configs/distill_ppo.yml`` relies on)."""
+    from tether_gym_agents.training import warm_start
+
+    for k in (3, 4):
+        _agent(tmp_path / "students" / f"seed_{k}", widths=(32, 32))
+    config = _config(tmp_path, tmp_path / "students" / "seed_{seed}")
+    for k in (3, 4):
+        options = TrainOptions(config=str(config), out=str(tmp_path / f"run{k}"), seed=k,
+                               no_progress=True)
+        settings = resolve_settings(options)
+        assert settings.run["init_policy"] == str(tmp_path / "students" / f"seed_{k}")
+    with pytest.raises(ConfigError, match="seed_5"):  # no such student: named, before a run
+        resolve_settings(TrainOptions(config=str(config), out=str(tmp_path / "run5"), seed=5,
+                                      no_progress=True))
+    assert not (tmp_path / "run5").exists()
+    assert warm_start.init_policy_for("a/{seed}/b_{seed}", 7) == "a/7/b_7"
+    assert warm_start.init_policy_for("a/{seeds}/{0}", 7) == "a/{seeds}/{0}"  # no format
+    monkeypatch.setattr(warm_start, "pretrained_agents",
+                        lambda: {"student": tmp_path / "students"})
+    monkeypatch.chdir(tmp_path / "students")  # no folder "student" here
+    assert warm_start.agent_location("student/seed_3") == tmp_path / "students" / "seed_3"
+    here = warm_start.agent_location("seed_3")  # an existing path wins
+    assert here.resolve() == (tmp_path / "students" / "seed_3").resolve()
+    assert warm_start.agent_location("nothing/seed_3").as_posix() == "nothing/seed_3"
