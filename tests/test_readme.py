@@ -67,7 +67,8 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
         "needs the five ppo runs with their checkpoints (tests/agents/evaluation/"
         "test_curves.py runs the command on tiny runs)",
     "python evaluate.py curves docs/curves/ppo docs/curves/ppo_symlog docs/curves/ppo_g025 "
-    "docs/curves/ppo_fast docs/curves/sac docs/curves/smc_residual --out docs/curves":
+    "docs/curves/ppo_fast docs/curves/sac docs/curves/smc_residual docs/curves/distill_ppo "
+    "docs/curves/sac_residual --out docs/curves":
         "rewrites the shipped side-by-side curves (test_curves.py puts written curves side "
         "by side)",
     "python train.py --algo sac --config configs/sac.yml --seeds 5 --out runs/sac": RAY,
@@ -84,6 +85,14 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
     "python train.py --config agents/configs/ppo_residual.yml --seeds 5 --seed 0 --out "
     "runs/hybrid": RAY,
     "python -m tether_gym_agents.files export runs/hybrid agents/pretrained/smc_residual":
+        "writes the shipped agents from their full-budget runs",
+    "python -m tether_gym_agents.files export runs/distill_ppo agents/pretrained/distill_ppo":
+        "writes the shipped agents from their full-budget runs (experiments/issue36/"
+        "distill_row.sh, which needs the shared mpc dataset)",
+    "python train.py --algo sac --config configs/sac_residual.yml --seed K --out "
+    "runs/sac_residual/seed_K": "K stands for each seed 0 ... 4 of the shipped agents (about "
+        "12 min each; tests/agents/training/test_shipped_commands.py resolves them)",
+    "python -m tether_gym_agents.files export runs/sac_residual agents/pretrained/sac_residual":
         "writes the shipped agents from their full-budget runs",
     "python train.py --algo ppo --seeds 10 --out runs/ppo": RAY,
     "python train.py --algo ppo --seeds 10 --out /shared/runs/ppo --ray-address auto":

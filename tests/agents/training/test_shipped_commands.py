@@ -21,8 +21,18 @@ from tether_gym_agents.files.run_folder import read_config
 from tether_gym_agents.training.settings import TrainOptions, resolve_settings
 
 REPO = Path(__file__).resolve().parents[3]
-SEEDS = [(name, run) for name, path in sorted(pretrained_agents().items())
-         for run in sorted(Path(path).glob("seed_*"))]
+ALL_SEEDS = [(name, run) for name, path in sorted(pretrained_agents().items())
+             for run in sorted(Path(path).glob("seed_*"))]
+
+
+def _is_distill(run: Path) -> bool:
+    return (run / "command.txt").read_text().startswith("python train.py distill ")
+
+
+SEEDS = [(name, run) for name, run in ALL_SEEDS if not _is_distill(run)]
+"""The seeds trained by reinforcement learning (``train.py`` with a config)."""
+DISTILLED = [(name, run) for name, run in ALL_SEEDS if _is_distill(run)]
+"""The seeds fitted by ``train.py distill`` on the shared mpc dataset (issue 36)."""
 
 
 def _argv(line: str) -> list[str]:
@@ -38,7 +48,30 @@ def _env(kwargs: dict) -> EnvConfig:
 
 def test_every_shipped_agent_has_seeds():
     assert {name for name, _ in SEEDS} >= {"ppo", "ppo_symlog", "ppo_g025", "smc_residual",
-                                           "ppo_fast", "sac"}
+                                           "ppo_fast", "sac", "distill_ppo", "sac_residual"}
+    assert {name for name, _ in DISTILLED} == {"distill_bc"}
+
+
+@pytest.mark.parametrize(("name", "run"), DISTILLED, ids=[f"{n}-{r.name}" for n, r in DISTILLED])
+def test_a_distilled_seeds_command_is_the_documented_fit(name, run):
+    """``command.txt`` of a behaviour-cloned seed parses with ``train.py distill``'s own
+    parser into the fit experiments/issue36/distill_row.sh documents: set A of the shared
+    dataset (the even parts 0 ... 166, made by make_data.sh), no labelling iterations."""
+    import json
+
+    from tether_gym_agents.training.distill_cli import build_parser as distill_parser
+
+    line = (run / "command.txt").read_text().strip()
+    assert "\n" not in line
+    args = distill_parser().parse_args(_argv(line)[1:])
+    assert args.seed == int(run.name.split("_")[1])
+    assert (args.iterations, args.epochs, args.batch_size, args.symlog_scale,
+            args.check_episodes) == (0, 40, 2048, 1e-4, 0)
+    parts = sorted(int(Path(f).parent.name.removeprefix("part_")) for f in args.data)
+    assert parts == list(range(0, 167, 2))
+    info = json.loads((run / "train_info.json").read_text())
+    assert info["command"] == line and info["seed"] == args.seed
+    assert info["labels"] == 1_256_918 and info["episodes"] == 1667  # docs/distillation.md
 
 
 @pytest.mark.parametrize(("name", "run"), SEEDS, ids=[f"{n}-{r.name}" for n, r in SEEDS])
