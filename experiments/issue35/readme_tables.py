@@ -8,10 +8,12 @@ on ``robust`` and ``beyond``), so each README table is regenerated from the ship
 results.json files:
 
     python experiments/issue35/readme_tables.py docs/eval docs/eval_mpc
-    python experiments/issue35/readme_tables.py docs/eval_robust docs/eval_robust/mpc \
-        docs/eval_robust/issue36
-    python experiments/issue35/readme_tables.py docs/eval_beyond docs/eval_beyond/mpc \
-        docs/eval_beyond/issue36
+    python experiments/issue35/readme_tables.py docs/eval_robust docs/eval_robust/mpc
+        docs/eval_robust/distill docs/eval_robust/sac_residual
+    python experiments/issue35/readme_tables.py docs/eval_beyond docs/eval_beyond/mpc
+        docs/eval_beyond/distill docs/eval_beyond/sac_residual
+
+(each of the last two is one command line).
 """
 
 from __future__ import annotations

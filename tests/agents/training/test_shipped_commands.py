@@ -8,6 +8,7 @@ steps of its ``train_info.json``.
 
 from __future__ import annotations
 
+import json
 import shlex
 from pathlib import Path
 
@@ -26,7 +27,8 @@ ALL_SEEDS = [(name, run) for name, path in sorted(pretrained_agents().items())
 
 
 def _is_distill(run: Path) -> bool:
-    return (run / "command.txt").read_text().startswith("python train.py distill ")
+    """A seed fitted by ``train.py distill`` (what its ``train_info.json`` records)."""
+    return json.loads((run / "train_info.json").read_text()).get("algo") == "dagger"
 
 
 SEEDS = [(name, run) for name, run in ALL_SEEDS if not _is_distill(run)]
@@ -57,8 +59,6 @@ def test_a_distilled_seeds_command_is_the_documented_fit(name, run):
     """``command.txt`` of a behaviour-cloned seed parses with ``train.py distill``'s own
     parser into the fit experiments/issue36/distill_row.sh documents: set A of the shared
     dataset (the even parts 0 ... 166, made by make_data.sh), no labelling iterations."""
-    import json
-
     from tether_gym_agents.training.distill_cli import build_parser as distill_parser
 
     line = (run / "command.txt").read_text().strip()
@@ -76,8 +76,6 @@ def test_a_distilled_seeds_command_is_the_documented_fit(name, run):
 
 @pytest.mark.parametrize(("name", "run"), SEEDS, ids=[f"{n}-{r.name}" for n, r in SEEDS])
 def test_command_txt_parses_into_a_from_scratch_run(name, run, tmp_path, monkeypatch):
-    import json
-
     monkeypatch.chdir(REPO)  # the commands name configs/ relative to a clone
     lines = [ln for ln in (run / "command.txt").read_text().splitlines() if ln.strip()]
     args = [build_parser().parse_args(_argv(ln)) for ln in lines]
