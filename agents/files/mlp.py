@@ -4,10 +4,20 @@ torch's batched matrix products sum in an order that depends on the batch size, 
 episode's actions changed by about 1e-7 with the number of episodes evaluated beside it,
 which a closed loop can amplify into a different episode. :class:`NumpyMLP` evaluates the
 same network (the weights of the stable-baselines3 policy, cast to float64) with every
-dot product summed over its own inputs only (``(h[:, None, :] * W).sum(-1)``, NumPy's
-pairwise sum along the last axis): row i of a batch is bitwise the same as row i alone,
-whatever the batch size, thread count or the other rows. The actions agree with SB3's
-float32 forward pass to float32 rounding (tests/agents/test_mlp.py).
+dot product summed over its own inputs only: row i of a batch is bitwise the same as row
+i alone, whatever the batch size, thread count or the other rows. The actions agree
+with SB3's float32 forward pass to float32 rounding (tests/agents/files/test_mlp.py).
+
+Each dot product is summed in the order of NumPy's pairwise summation along a
+contiguous last axis, which defined the shipped results (``(h[:, None, :] *
+W).sum(-1)``, their first implementation): blocks of at most 128 terms are summed in
+eight interleaved partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) +
+(r6 + r7)) plus the remainder in order, longer runs are split at half (rounded down
+to a multiple of 8) and the halves' sums added, and the reduction starts from 0.
+:func:`_linear` does exactly this in compiled loops that vectorise over the outputs
+(bitwise equal to the NumPy expression, tests/agents/files/test_mlp.py) and
+needs no (batch, out, in) temporary: 5-14 times faster for 256-wide layers
+(bench/README.md).
 
 Supported: PPO/A2C ``ActorCriticPolicy`` without gSDE, SAC/TQC actors (a body and a
 ``mu`` head) and TD3's deterministic actor (``mu`` ending in tanh), on flattened Box
@@ -18,11 +28,93 @@ observations, with Linear layers and Tanh/ReLU activations.
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+from numba import njit
 
-__all__ = ["NumpyMLP"]
+__all__ = ["NumpyMLP", "pairwise_linear"]
+
+_BLOCK = 128
+"""NumPy's ``PW_BLOCKSIZE``: the longest run summed without a split."""
+
+
+@njit(cache=False)
+def _block(h, wt, lo, n):  # pragma: no cover - compiled (tested against NumPy)
+    """sum_{k < n} h[b, lo + k] wt[lo + k, o] in NumPy's pairwise order, (B, out)."""
+    batch, n_out = h.shape[0], wt.shape[1]
+    res = np.empty((batch, n_out))
+    if n < 8:
+        for b in range(batch):
+            for o in range(n_out):
+                res[b, o] = -0.0
+            for i in range(lo, lo + n):
+                x = h[b, i]
+                for o in range(n_out):
+                    res[b, o] += x * wt[i, o]
+        return res
+    if n <= _BLOCK:
+        acc = np.empty((8, n_out))
+        m = n - n % 8
+        for b in range(batch):
+            for k in range(8):
+                x = h[b, lo + k]
+                for o in range(n_out):
+                    acc[k, o] = x * wt[lo + k, o]
+            for i in range(lo + 8, lo + m, 8):
+                for k in range(8):
+                    x = h[b, i + k]
+                    for o in range(n_out):
+                        acc[k, o] += x * wt[i + k, o]
+            for o in range(n_out):
+                res[b, o] = (((acc[0, o] + acc[1, o]) + (acc[2, o] + acc[3, o]))
+                             + ((acc[4, o] + acc[5, o]) + (acc[6, o] + acc[7, o])))
+            for i in range(lo + m, lo + n):
+                x = h[b, i]
+                for o in range(n_out):
+                    res[b, o] += x * wt[i, o]
+        return res
+    half = n // 2
+    half -= half % 8
+    left = _block(h, wt, lo, half)
+    right = _block(h, wt, lo + half, n - half)
+    for b in range(batch):
+        for o in range(n_out):
+            res[b, o] = left[b, o] + right[b, o]
+    return res
+
+
+@njit(cache=False)
+def _linear(h, wt):  # pragma: no cover - compiled (tested against NumPy)
+    """(B, out) dot products of h (B, in) with the columns of wt (in, out), from 0."""
+    out = _block(h, wt, 0, h.shape[1])
+    for b in range(out.shape[0]):
+        for o in range(out.shape[1]):
+            out[b, o] = 0.0 + out[b, o]
+    return out
+
+
+def pairwise_linear(h: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """``(h[:, None, :] * weight[None]).sum(-1)``, bitwise, without the temporary.
+
+    Parameters
+    ----------
+    h : ndarray, shape (B, in)
+        Inputs (cast to contiguous float64).
+    weight : ndarray, shape (out, in)
+        A linear layer's weight (cast to float64).
+
+    Returns
+    -------
+    ndarray, shape (B, out)
+        float64 dot products, each summed in NumPy's pairwise order (module docstring).
+    """
+    h = np.ascontiguousarray(h, dtype=np.float64)
+    wt = np.ascontiguousarray(np.asarray(weight, dtype=np.float64).T)
+    if h.ndim != 2 or wt.ndim != 2 or h.shape[1] != wt.shape[0] or h.shape[1] == 0:
+        raise ValueError(f"pairwise_linear: inputs {h.shape} and weight "
+                         f"{np.shape(weight)} do not make (B, in) x (out, in) with in >= 1")
+    return _linear(h, wt)
 
 _ACTIVATIONS: dict[str, Callable[[np.ndarray], np.ndarray]] = {
     "Tanh": np.tanh, "ReLU": lambda x: np.maximum(x, 0.0)}
@@ -33,6 +125,10 @@ class _Layer:
     weight: np.ndarray   # (out, in) float64
     bias: np.ndarray     # (out,) float64
     activation: str | None
+    weight_t: np.ndarray = field(init=False, repr=False, compare=False)  # (in, out) contiguous
+
+    def __post_init__(self):
+        object.__setattr__(self, "weight_t", np.ascontiguousarray(self.weight.T))
 
 
 def _layers(modules) -> list[_Layer] | None:
@@ -106,9 +202,9 @@ class NumpyMLP:
 
     def __call__(self, obs: np.ndarray) -> np.ndarray:
         """Actions (B, act_dim) float32 for normalised observations (B, obs_dim)."""
-        h = np.asarray(obs, dtype=np.float64)
+        h = np.ascontiguousarray(obs, dtype=np.float64)
         for layer in self.layers:
-            h = (h[:, None, :] * layer.weight[None, :, :]).sum(axis=-1) + layer.bias
+            h = _linear(h, layer.weight_t) + layer.bias
             if layer.activation is not None:
                 h = _ACTIVATIONS[layer.activation](h)
         if self.squash:

@@ -45,3 +45,31 @@ def test_matches_sb3_and_is_batch_invariant(algo):
 def test_unsupported_networks_fall_back():
     model = _model("ppo", use_sde=True)
     assert NumpyMLP.from_policy(model.policy) is None
+
+
+@pytest.mark.parametrize("n_in", [1, 3, 7, 8, 9, 20, 24, 64, 127, 128, 129, 136, 256, 257,
+                                  300, 512, 1000])
+def test_compiled_dot_products_sum_in_numpys_pairwise_order(n_in):
+    """pairwise_linear is bitwise NumPy's ``(h[:, None, :] * W).sum(-1)`` (the order the
+    shipped results were made in), over widths around every branch of the pairwise
+    sum: below 8, up to the 128-term block, split in halves above it."""
+    from tether_gym_agents.files.mlp import pairwise_linear
+
+    rng = np.random.default_rng(n_in)
+    for scale in (1e-3, 1.0, 1e3):
+        h = rng.standard_normal((int(rng.integers(1, 9)), n_in)) * scale
+        w = rng.standard_normal((int(rng.integers(1, 70)), n_in))
+        expected = (h[:, None, :] * w[None, :, :]).sum(axis=-1)
+        got = pairwise_linear(h, w)
+        assert got.dtype == np.float64 and got.shape == expected.shape
+        assert np.array_equal(got, expected)
+        # a plain matrix product sums in another order: the test can tell them apart
+        if n_in >= 20 and scale == 1.0:
+            assert not np.array_equal(h @ w.T, expected)
+
+
+def test_pairwise_linear_refuses_shapes_that_do_not_fit():
+    from tether_gym_agents.files.mlp import pairwise_linear
+
+    with pytest.raises(ValueError, match=r"\(2, 3\).*\(4, 5\)"):
+        pairwise_linear(np.zeros((2, 3)), np.zeros((4, 5)))
