@@ -75,13 +75,14 @@ from ..files.run_folder import (
     write_config,
     write_train_info,
 )
-from ..files.safe_format import ObsNormalization, save_agent
+from ..files.safe_format import AgentLoadError, ObsNormalization, save_agent
 from ..files.trained import TrainedAgent
 from .config import training_distribution
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
-           "draw_episode", "make_expert", "rollout", "make_student", "fit_student",
-           "normalization", "train_dagger", "DATA_FILE", "TRAIN_LOG_FILE", "ALGO", "MIXTURES"]
+           "draw_episode", "make_expert", "rollout", "make_student", "start_from",
+           "InitPolicyError", "fit_student", "normalization", "train_dagger", "DATA_FILE",
+           "TRAIN_LOG_FILE", "ALGO", "MIXTURES"]
 
 DATA_FILE = "dagger_data.npz"
 TRAIN_LOG_FILE = "train_log.json"
@@ -152,6 +153,14 @@ class DaggerSettings:
         (the ``symlog_errors`` features of ``ppo_symlog``, recorded in ``agent.json``), so
         that tracking errors far below the first orbit's transient reach it at a usable
         scale. None: the observation alone.
+    init_policy : str or None
+        A trained rate-mode PPO-format agent (a run folder, or a shipped agent by name,
+        ``distill_ppo/seed_{seed}``; ``{seed}`` stands for :attr:`seed`) whose actor and
+        observation statistics start the student: DAgger from a policy that already flies
+        (e.g. a fine-tuned student), mpc relabelling the states *it* visits. The
+        statistics then stay fixed for the run (the actor was fitted on inputs scaled by
+        them), and iteration 0 only checks the starting policy (no labels, no refit;
+        with ``data``: the refit on it). None: a new network.
     """
 
     iterations: int = 5
@@ -169,6 +178,7 @@ class DaggerSettings:
     gate: float | None = None
     drop_failed: bool = False
     symlog_scale: float | None = None
+    init_policy: str | None = None
 
     def __post_init__(self):
         for f in fields(self):
@@ -183,6 +193,10 @@ class DaggerSettings:
                 for w in arch):
             raise ValueError(f"net_arch={arch!r}: allowed a tuple of 1 to {_MAX_DEPTH} layer "
                              f"widths, each an integer in [1, {_MAX_WIDTH}]")
+        init = self.init_policy
+        if init is not None and (not isinstance(init, str) or not init.strip()):
+            raise ValueError(f"init_policy={init!r}: allowed the path or shipped name of a "
+                             "trained agent (a folder with agent.json)")
 
 
 def _check_number(name: str, value, lo: float, hi: float, integer: bool) -> None:
@@ -456,6 +470,65 @@ def make_student(env, settings: DaggerSettings):
     return policy
 
 
+class InitPolicyError(ValueError):
+    """``init_policy`` names an agent that cannot start the student (:func:`start_from`)."""
+
+
+def start_from(settings: DaggerSettings, policy, obs_dim: int) -> TrainedAgent:
+    """Load ``settings.init_policy``, check that it fits the student, copy its actor in.
+
+    Parameters
+    ----------
+    settings : DaggerSettings
+        Its ``init_policy`` (not None) names the agent; ``{seed}`` stands for the seed.
+    policy : ActorCriticPolicy
+        The new student (:func:`make_student`), which takes the agent's actor.
+    obs_dim : int
+        The env's observation length, before the student's features.
+
+    Returns
+    -------
+    TrainedAgent
+        The agent, whose ``norm`` the run keeps.
+
+    Raises
+    ------
+    InitPolicyError
+        Naming the agent and what does not fit (algorithm, hybrid, features, action
+        mode, normalisation, input count, layer widths or activation).
+    """
+    from .warm_start import agent_location, copy_actor, init_policy_for
+
+    value = init_policy_for(str(settings.init_policy), settings.seed)
+    what = f"init_policy {value!r}"
+    try:
+        agent = TrainedAgent.load(agent_location(value))  # safe files only, no pickle
+    except AgentLoadError as exc:
+        raise InitPolicyError(f"{what}: {exc}") from None
+    if agent.algo != ALGO or agent.hybrid is not None:
+        kind = f"{agent.algo} agent" + (" of a hybrid" if agent.hybrid else "")
+        raise InitPolicyError(f"{what}: a {kind}; only a ppo agent that acts alone can "
+                              "start the student")
+    spec = student_features(settings)
+    mine = None if spec is None else FeatureSpec.from_dict(spec)
+    if agent.features != mine:
+        raise InitPolicyError(f"{what}: its input features {agent.features} differ from the "
+                         f"student's {mine} (give --symlog-scale as the agent's)")
+    mode = agent.env_kwargs.get("action_mode")
+    if mode != "rate":
+        raise InitPolicyError(f"{what}: trained with action_mode={mode!r}; the student commands "
+                         "reel rates (action_mode 'rate'), as mpc does")
+    n_inputs = obs_dim + (0 if mine is None else mine.size(policy.action_space.shape[0]))
+    if agent.norm is None or agent.norm.mean.shape != (n_inputs,):
+        have = "no" if agent.norm is None else f"{agent.norm.mean.shape[0]}"
+        raise InitPolicyError(f"{what}: {have} normalised inputs; the student has {n_inputs}")
+    try:
+        copy_actor(agent.model, policy, what, "--net-arch")
+    except ValueError as exc:
+        raise InitPolicyError(str(exc)) from None
+    return agent
+
+
 def normalization(obs: np.ndarray) -> ObsNormalization:
     """VecNormalize-style statistics of the dataset's observations (clip 10, eps 1e-8)."""
     x = np.asarray(obs, dtype=np.float64)
@@ -535,23 +608,28 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         raise ValueError("iterations=0: allowed only with shared data to fit on (--data)")
     t0 = time.perf_counter()
     torch.set_num_threads(1)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
     env_kwargs = training_env_kwargs(settings.orbits)
-    write_config(out, {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
-                       "hyperparams": {**asdict(settings), "net_arch": list(settings.net_arch)},
-                       "env_kwargs": env_kwargs})
-    if command:
-        append_command(out, command)
     check_env = gym.make(tether_gym.ENV_ID, **env_kwargs)
     masses = env_config(check_env).masses
     rng = np.random.default_rng(settings.seed)
     check_seeds = [int(s) for s in rng.integers(0, 2**31 - 1, settings.check_episodes)]
     policy = make_student(check_env, settings)
-    generator = torch.Generator().manual_seed(settings.seed)
     obs_dim, act_dim = env_config(check_env).obs_dim, env_config(check_env).n_tethers
+    start = None if settings.init_policy is None else start_from(settings, policy, obs_dim)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_config(out, {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
+                       "hyperparams": {**asdict(settings), "net_arch": list(settings.net_arch)},
+                       "env_kwargs": env_kwargs})
+    if command:
+        append_command(out, command)
+    generator = torch.Generator().manual_seed(settings.seed)
     data = Dataset.empty(obs_dim, act_dim)
     student = None
+    if start is not None:  # the starting policy flies from iteration 1 on, its statistics kept
+        first = TrainedAgent(policy, start.norm, algo=ALGO, features=student_features(settings))
+        def student(o, agent=first):
+            return agent.predict(o, deterministic=True)[0]
     history: list[dict] = []
     label_time = 0.0
     number = 0
@@ -559,11 +637,12 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
     if initial is not None:  # iteration 0 is the fit on the shared data alone
         data.extend(initial)
         number = len(data.episodes)
-    for it in range(settings.iterations + (initial is not None)):
+    zeroth = initial is not None or start is not None  # iteration 0: no labels
+    for it in range(settings.iterations + zeroth):
         beta = settings.beta_decay ** it
         t_it = time.perf_counter()
         label_start = label_time
-        for _ in range(0 if initial is not None and it == 0 else settings.episodes):
+        for _ in range(0 if zeroth and it == 0 else settings.episodes):
             kwargs = draw_episode(rng, env_kwargs, masses)
             env_seed = int(rng.integers(0, 2**31 - 1))
             mix_seed = int(rng.integers(0, 2**31 - 1))
@@ -587,8 +666,9 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
                 "mixture_seed": mix_seed})
             env.close()
             number += 1
-        norm = normalization(student_inputs(settings, data.obs, act_dim))
-        loss = fit_student(policy, data, norm, settings, generator)
+        norm = (start.norm if start is not None and start.norm is not None  # kept
+                else normalization(student_inputs(settings, data.obs, act_dim)))
+        loss = fit_student(policy, data, norm, settings, generator) if len(data) else None
         agent = TrainedAgent(policy, norm, algo=ALGO, features=student_features(settings))
         def student(o, agent=agent):
             return agent.predict(o, deterministic=True)[0]
@@ -658,4 +738,5 @@ def _progress(r: dict, settings: DaggerSettings) -> str:
     return (f"iteration {r['iteration']} (beta {r['beta']:.3g}, expert acted "
             f"{r['expert_acted']:.2f}): {r['episodes']} episodes, {r['labels']} labels, "
             f"{fmt_rate(r['labels_per_s'])}, {r['wall_time_s']:.1f} s; "
-            f"loss {r['loss']:.3e}{check}")
+            f"loss {'n/a (no refit)' if r['loss'] is None else format(r['loss'], '.3e')}"
+            f"{check}")

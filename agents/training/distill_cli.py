@@ -16,7 +16,16 @@ import shlex
 import sys
 from pathlib import Path
 
-from .dagger import DATA_FILE, LIMITS, MIXTURES, DaggerSettings, Dataset, fmt_rate, train_dagger
+from .dagger import (
+    DATA_FILE,
+    LIMITS,
+    MIXTURES,
+    DaggerSettings,
+    Dataset,
+    InitPolicyError,
+    fmt_rate,
+    train_dagger,
+)
 
 __all__ = ["main", "build_parser"]
 
@@ -88,6 +97,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--data", type=str, nargs="+", default=None, metavar="NPZ",
                    help="shared labelled data (dagger_data.npz files of earlier runs) the "
                         "student is first fitted on; the labelled iterations follow")
+    p.add_argument("--init-policy", type=str, default=None, metavar="AGENT",
+                   help="start the student from a trained rate-mode ppo agent (a run folder "
+                        "or a shipped name such as distill_ppo/seed_{seed}; {seed} is the "
+                        "seed), its observation statistics kept: mpc relabels the states it "
+                        "visits from iteration 1 on (default: a new network)")
     p.add_argument("--out", type=str, default=None,
                    help="run folder (default runs/dagger/seed_<seed>)")
     return p
@@ -104,7 +118,8 @@ def main(argv=None) -> int:
             net_arch=tuple(args.net_arch), batch_size=args.batch_size,
             learning_rate=args.learning_rate, check_episodes=args.check_episodes,
             mixture=args.mixture, expert_noise=args.expert_noise, gate=args.gate,
-            drop_failed=args.drop_failed, symlog_scale=args.symlog_scale)
+            drop_failed=args.drop_failed, symlog_scale=args.symlog_scale,
+            init_policy=args.init_policy)
     except ValueError as exc:
         print(f"{PROG}: error: {_flag(str(exc))}", file=sys.stderr)
         return 2
@@ -136,7 +151,11 @@ def main(argv=None) -> int:
         else:
             initial.extend(part)
     command = shlex.join(["python", "train.py", "distill", *argv])
-    summary = train_dagger(settings, out, command=command, initial=initial)
+    try:
+        summary = train_dagger(settings, out, command=command, initial=initial)
+    except InitPolicyError as exc:  # refused before the run folder is written
+        print(f"{PROG}: error: {_flag(str(exc))}", file=sys.stderr)
+        return 2
     print(f"wrote {out}: {summary['labels']} labels in {summary['episodes']} episodes, "
           f"{summary['wall_time_s']:.1f} s ({fmt_rate(summary['labels_per_s'])}); "
           f"score it with: python evaluate.py {shlex.quote(str(out))}")

@@ -39,7 +39,8 @@ from ..files.trained import TrainedAgent, pretrained_agents
 from .config import ConfigError
 
 __all__ = ["INIT_KEY", "SEED_FIELD", "ACTOR_MODULES", "check_init_policy", "init_policy_for",
-           "agent_location", "warm_start", "init_path", "freeze_obs_stats",
+           "agent_location", "copy_actor", "warm_start", "init_path",
+           "freeze_obs_stats",
            "FrozenRunningMeanStd"]
 
 INIT_KEY = "init_policy"
@@ -144,6 +145,33 @@ def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
     return value
 
 
+def copy_actor(theirs, mine, what: str, widths: str) -> None:
+    """Copy ``theirs``' actor (:data:`ACTOR_MODULES`) into the policy ``mine``.
+
+    Both are stable-baselines3 ``ActorCriticPolicy`` objects; ``what`` names the source
+    and ``widths`` the setting that fixes ``mine``'s layer widths, for messages.
+
+    Raises
+    ------
+    ConfigError
+        If the activation or a copied layer's shape differs.
+    """
+    import torch
+
+    if theirs.activation_fn is not mine.activation_fn:
+        raise ConfigError(f"{what}: activation {theirs.activation_fn.__name__}, the run's "
+                          f"policy has {mine.activation_fn.__name__}")
+    for name in ACTOR_MODULES:
+        src, dst = theirs.get_submodule(name).state_dict(), mine.get_submodule(name)
+        shapes = {k: tuple(v.shape) for k, v in src.items()}
+        want = {k: tuple(v.shape) for k, v in dst.state_dict().items()}
+        if shapes != want:
+            raise ConfigError(f"{what}: its {name} has layers {shapes}, the run's policy "
+                              f"{want} (set {widths} to the agent's widths)")
+        with torch.no_grad():
+            dst.load_state_dict(src, strict=True)
+
+
 def warm_start(model, venv, path) -> TrainedAgent:
     """Copy the agent at ``path``'s actor and observation statistics into a new model.
 
@@ -167,23 +195,9 @@ def warm_start(model, venv, path) -> TrainedAgent:
     ConfigError
         If a copied layer's shape, the activation or the normalisation's clip differs.
     """
-    import torch
-
     agent = _load(path, INIT_KEY)
     what = f"{INIT_KEY} {str(path)!r}"
-    theirs, mine = agent.model, model.policy
-    if theirs.activation_fn is not mine.activation_fn:
-        raise ConfigError(f"{what}: activation {theirs.activation_fn.__name__}, the run's "
-                          f"policy_kwargs give {mine.activation_fn.__name__}")
-    for name in ACTOR_MODULES:
-        src, dst = theirs.get_submodule(name).state_dict(), mine.get_submodule(name)
-        shapes = {k: tuple(v.shape) for k, v in src.items()}
-        want = {k: tuple(v.shape) for k, v in dst.state_dict().items()}
-        if shapes != want:
-            raise ConfigError(f"{what}: its {name} has layers {shapes}, the run's policy "
-                              f"{want} (set policy_kwargs.net_arch.pi to the agent's widths)")
-        with torch.no_grad():
-            dst.load_state_dict(src, strict=True)
+    copy_actor(agent.model, model.policy, what, "policy_kwargs.net_arch.pi")
     if agent.norm is not None:
         rms = venv.obs_rms
         if rms.mean.shape != agent.norm.mean.shape:

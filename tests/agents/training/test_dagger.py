@@ -342,3 +342,51 @@ def test_shared_data_then_labelled_iterations(run, tmp_path, monkeypatch):
     log = json.loads((tmp_path / "more" / dagger.TRAIN_LOG_FILE).read_text())
     assert [r["iteration"] for r in log] == [0, 1]
     assert log[1]["dropped_labels"] == calls[0] and log[1]["beta"] == 0.5
+
+
+def test_init_policy_flies_from_iteration_1_with_its_statistics(run, tmp_path):
+    """--init-policy AGENT: iteration 0 only checks the agent (no labels, no refit, its
+    actor and statistics as the checkpoint); iteration 1's episode is flown by that agent
+    alone (beta 0: replayed here, bitwise the same observations) and labelled by mpc; the
+    refit keeps the agent's observation statistics."""
+    out, _, _ = run
+    start = TrainedAgent.load(out)
+    code, text = _train(tmp_path / "ft", ["--init-policy", str(out), "--iterations", "1",
+                                          "--beta-decay", "0"])
+    assert code == 0, text
+    log = json.loads((tmp_path / "ft" / dagger.TRAIN_LOG_FILE).read_text())
+    assert [(r["iteration"], r["labels"], r["loss"]) for r in log][0] == (0, 0, None)
+    assert log[1]["labels"] > 0 and log[1]["loss"] > 0 and "loss n/a (no refit)" in text
+    first = tmp_path / "ft" / "checkpoints" / "agent_0_steps"
+    theirs, mine = load_file(out / "policy.safetensors"), load_file(first / "policy.safetensors")
+    for key in theirs:
+        if key.startswith(("mlp_extractor.policy_net", "action_net")):
+            torch.testing.assert_close(mine[key], theirs[key], rtol=0, atol=0)
+    for folder in (first, tmp_path / "ft"):
+        norm = TrainedAgent.load(folder).norm
+        np.testing.assert_array_equal(norm.mean, start.norm.mean)
+        np.testing.assert_array_equal(norm.var, start.norm.var)
+    data = dict(np.load(tmp_path / "ft" / dagger.DATA_FILE))
+    assert not data["expert_acted"].any()
+    kwargs = {k: v for k, v in dagger.training_env_kwargs(float(ORBITS)).items()
+              if k not in ("eccentricity_range", "mass_range")}
+    env = gym.make(tether_gym.ENV_ID, **kwargs, eccentricity=float(data["episode_eccentricity"][0]),
+                   masses=tuple(float(m) for m in data["episode_masses"][0]))
+    episode = dagger.rollout(env, int(data["episode_env_seed"][0]),
+                             student=lambda o: start.predict(o, deterministic=True)[0])
+    np.testing.assert_array_equal(episode.obs, data["obs"])
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--symlog-scale", "1e-4"], "input features"),
+    (["--net-arch", "16", "16"], "layers"),
+    (["--init-policy", "no/such/agent"], "does not exist"),
+])
+def test_init_policy_that_does_not_fit_is_refused_before_the_folder(run, tmp_path, capsys,
+                                                                     extra, named):
+    out, _, _ = run
+    code, _ = _train(tmp_path / "bad", ["--init-policy", str(out), *extra])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "init_policy" in err and named in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "bad").exists()
