@@ -16,8 +16,10 @@ eight interleaved partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) 
 to a multiple of 8) and the halves' sums added, and the reduction starts from 0.
 :func:`_linear` does exactly this in compiled loops that vectorise over the outputs
 (bitwise equal to the NumPy expression, tests/agents/files/test_mlp.py) and
-needs no (batch, out, in) temporary: 5-14 times faster for 256-wide layers
-(bench/README.md).
+needs no (batch, out, in) temporary: 4-15 times faster for 256-wide layers
+(bench/README.md). The split is a plan computed in Python (:func:`_plan`), so that the
+compiled functions do not recurse and numba can cache them (``cache=True``, beside this
+file or in numba's user cache: about 2-3 s to compile once, 0.4 s to load).
 
 Supported: PPO/A2C ``ActorCriticPolicy`` without gSDE, SAC/TQC actors (a body and a
 ``mu`` head) and TD3's deterministic actor (``mu`` ending in tanh), on flattened Box
@@ -27,6 +29,7 @@ observations, with Linear layers and Tanh/ReLU activations.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
@@ -39,11 +42,10 @@ _BLOCK = 128
 """NumPy's ``PW_BLOCKSIZE``: the longest run summed without a split."""
 
 
-@njit(cache=False)
-def _block(h, wt, lo, n):  # pragma: no cover - compiled (tested against NumPy)
-    """sum_{k < n} h[b, lo + k] wt[lo + k, o] in NumPy's pairwise order, (B, out)."""
+@njit(cache=True)
+def _leaf(h, wt, lo, n, res):  # pragma: no cover - compiled (tested against NumPy)
+    """res[b, o] = sum_{k < n} h[b, lo + k] wt[lo + k, o], n <= 128, in NumPy's order."""
     batch, n_out = h.shape[0], wt.shape[1]
-    res = np.empty((batch, n_out))
     if n < 8:
         for b in range(batch):
             for o in range(n_out):
@@ -52,46 +54,82 @@ def _block(h, wt, lo, n):  # pragma: no cover - compiled (tested against NumPy)
                 x = h[b, i]
                 for o in range(n_out):
                     res[b, o] += x * wt[i, o]
-        return res
-    if n <= _BLOCK:
-        acc = np.empty((8, n_out))
-        m = n - n % 8
-        for b in range(batch):
-            for k in range(8):
-                x = h[b, lo + k]
-                for o in range(n_out):
-                    acc[k, o] = x * wt[lo + k, o]
-            for i in range(lo + 8, lo + m, 8):
-                for k in range(8):
-                    x = h[b, i + k]
-                    for o in range(n_out):
-                        acc[k, o] += x * wt[i + k, o]
+        return
+    acc = np.empty((8, n_out))
+    m = n - n % 8
+    for b in range(batch):
+        for k in range(8):
+            x = h[b, lo + k]
             for o in range(n_out):
-                res[b, o] = (((acc[0, o] + acc[1, o]) + (acc[2, o] + acc[3, o]))
-                             + ((acc[4, o] + acc[5, o]) + (acc[6, o] + acc[7, o])))
-            for i in range(lo + m, lo + n):
-                x = h[b, i]
+                acc[k, o] = x * wt[lo + k, o]
+        for i in range(lo + 8, lo + m, 8):
+            for k in range(8):
+                x = h[b, i + k]
                 for o in range(n_out):
-                    res[b, o] += x * wt[i, o]
-        return res
-    half = n // 2
-    half -= half % 8
-    left = _block(h, wt, lo, half)
-    right = _block(h, wt, lo + half, n - half)
+                    acc[k, o] += x * wt[i + k, o]
+        for o in range(n_out):
+            res[b, o] = (((acc[0, o] + acc[1, o]) + (acc[2, o] + acc[3, o]))
+                         + ((acc[4, o] + acc[5, o]) + (acc[6, o] + acc[7, o])))
+        for i in range(lo + m, lo + n):
+            x = h[b, i]
+            for o in range(n_out):
+                res[b, o] += x * wt[i, o]
+
+
+@njit(cache=True)
+def _linear_plan(h, wt, leaf_lo, leaf_n, program):  # pragma: no cover - compiled
+    """(B, out) dot products of h (B, in) with the columns of wt (in, out) (:func:`_plan`)."""
+    batch, n_out = h.shape[0], wt.shape[1]
+    stack = np.empty((len(leaf_lo), batch, n_out))
+    top = 0
+    for code in program:
+        if code >= 0:  # a leaf's sum onto the stack
+            _leaf(h, wt, leaf_lo[code], leaf_n[code], stack[top])
+            top += 1
+        else:  # the two partial sums on top: left + right
+            top -= 1
+            for b in range(batch):
+                for o in range(n_out):
+                    stack[top - 1, b, o] = stack[top - 1, b, o] + stack[top, b, o]
+    out = np.empty((batch, n_out))
     for b in range(batch):
         for o in range(n_out):
-            res[b, o] = left[b, o] + right[b, o]
-    return res
-
-
-@njit(cache=False)
-def _linear(h, wt):  # pragma: no cover - compiled (tested against NumPy)
-    """(B, out) dot products of h (B, in) with the columns of wt (in, out), from 0."""
-    out = _block(h, wt, 0, h.shape[1])
-    for b in range(out.shape[0]):
-        for o in range(out.shape[1]):
-            out[b, o] = 0.0 + out[b, o]
+            out[b, o] = 0.0 + stack[0, b, o]
     return out
+
+
+@functools.cache
+def _plan(n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """NumPy's pairwise split of n terms: leaves (start, length) and the order of the adds.
+
+    Runs longer than 128 split at half rounded down to a multiple of 8, recursively;
+    ``program`` lists leaf k (k >= 0, left to right) and -1 for "add the last two
+    partial sums" in the order NumPy's recursion adds them.
+    """
+    lo: list[int] = []
+    size: list[int] = []
+    program: list[int] = []
+
+    def split(start: int, count: int) -> None:
+        if count <= _BLOCK:
+            program.append(len(lo))
+            lo.append(start)
+            size.append(count)
+            return
+        half = count // 2
+        half -= half % 8
+        split(start, half)
+        split(start + half, count - half)
+        program.append(-1)
+
+    split(0, n)
+    return (np.asarray(lo, dtype=np.int64), np.asarray(size, dtype=np.int64),
+            np.asarray(program, dtype=np.int64))
+
+
+def _linear(h: np.ndarray, wt: np.ndarray) -> np.ndarray:
+    """(B, out) for contiguous float64 h (B, in) and wt (in, out), NumPy's pairwise order."""
+    return _linear_plan(h, wt, *_plan(h.shape[1]))
 
 
 def pairwise_linear(h: np.ndarray, weight: np.ndarray) -> np.ndarray:
