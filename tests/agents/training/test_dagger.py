@@ -356,7 +356,9 @@ def test_init_policy_flies_from_iteration_1_with_its_statistics(run, tmp_path):
     assert code == 0, text
     log = json.loads((tmp_path / "ft" / dagger.TRAIN_LOG_FILE).read_text())
     assert [(r["iteration"], r["labels"], r["loss"]) for r in log][0] == (0, 0, None)
-    assert log[1]["labels"] > 0 and log[1]["loss"] > 0 and "loss n/a (no refit)" in text
+    assert log[1]["labels"] > 0 and log[1]["loss"] > 0
+    assert "iteration 0 (the starting policy, before any label): 0 episodes, 0 labels" in text
+    assert "loss n/a (no refit)" in text and "iteration 1 (beta 0, expert acted 0.00)" in text
     first = tmp_path / "ft" / "checkpoints" / "agent_0_steps"
     theirs, mine = load_file(out / "policy.safetensors"), load_file(first / "policy.safetensors")
     for key in theirs:
