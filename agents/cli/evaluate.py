@@ -79,8 +79,10 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
                              "added with register_policy), shipped agents "
                              "(ppo, ...), paths to trained agents (run folder, model file, or "
                              "a folder of seed_K run folders = one policy with several runs), "
-                             "or handover:AGENT (the agent hands over to smc, filtered); "
-                             "default: all baselines, shipped agents and handover:ppo")
+                             "handover:AGENT (the agent hands over to smc, filtered) or "
+                             "filtered:AGENT (a rate-mode agent behind the safety filter); "
+                             "default: all baselines, shipped agents, handover:ppo and "
+                             "filtered:distill_ppo")
     parser.add_argument("--suite", default="default",
                         help="scenario suite: a name below or a YAML suite file (default: "
                              "default)")

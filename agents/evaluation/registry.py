@@ -52,15 +52,18 @@ from .scenarios import Scenario
 __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_policy",
            "resolve_policy", "make_policy", "default_policies",
            "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
-           "HANDOVER_OF", "FILTERED", "ENTRY_POINT_GROUP", "ACTION_KEYS", "OBSERVATION_KEYS",
-           "TRAINED_ON_KEYS", "trained_on"]
+           "HANDOVER_OF", "FILTERED", "FILTERED_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS",
+           "OBSERVATION_KEYS", "TRAINED_ON_KEYS", "trained_on"]
 
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
 HANDOVER_OF = ("ppo",)
+"""Shipped agents whose handover hybrid ``python evaluate.py`` benchmarks by default."""
 FILTERED = "filtered:"
 """Prefix of a filtered agent's policy name: ``filtered:`` + a rate-mode trained agent."""
-"""Shipped agents whose handover hybrid ``python evaluate.py`` benchmarks by default."""
+FILTERED_OF = ("distill_ppo",)
+"""Shipped rate-mode agents that ``python evaluate.py`` also benchmarks behind the safety
+filter by default (issue 36's distilled row: the filter's cost counts in its ms/step)."""
 ENTRY_POINT_GROUP = "tether_gym_agents.policies"
 """Entry-point group of plugin packages: each entry names a function that registers the
 package's policies with :func:`register_policy` (called without arguments)."""
@@ -503,13 +506,15 @@ def shipped_agents() -> dict[str, Path]:
 def default_policies() -> list[str]:
     """What ``python evaluate.py`` benchmarks by default.
 
-    The built-in baselines but those of :data:`OPT_IN`, the shipped agents and the
-    handover hybrid of each shipped agent in :data:`HANDOVER_OF` (not the policies
-    registered by user code or plugins).
+    The built-in baselines but those of :data:`OPT_IN`, the shipped agents, the
+    handover hybrid of each shipped agent in :data:`HANDOVER_OF` and each shipped agent
+    of :data:`FILTERED_OF` behind the safety filter (not the policies registered by user
+    code or plugins).
     """
     shipped = shipped_agents()
     return ([name for name in BASELINES if name not in OPT_IN] + list(shipped)
-            + [HANDOVER + name for name in HANDOVER_OF if name in shipped])
+            + [HANDOVER + name for name in HANDOVER_OF if name in shipped]
+            + [FILTERED + name for name in FILTERED_OF if name in shipped])
 
 
 def resolve_policy(name: str, allow_pickle: bool = False) -> PolicySpec:

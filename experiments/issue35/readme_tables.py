@@ -10,8 +10,10 @@ results.json files:
     python experiments/issue35/readme_tables.py docs/eval docs/eval_mpc
     python experiments/issue35/readme_tables.py docs/eval_robust docs/eval_robust/mpc
         docs/eval_robust/distill docs/eval_robust/sac_residual
+        docs/eval_robust/filtered_distill_ppo
     python experiments/issue35/readme_tables.py docs/eval_beyond docs/eval_beyond/mpc
         docs/eval_beyond/distill docs/eval_beyond/sac_residual
+        docs/eval_beyond/filtered_distill_ppo
 
 (each of the last two is one command line).
 """

@@ -27,6 +27,23 @@ def test_offsets_sizes_and_slices_of_nested_groups():
         "e": slice(8, 9)}
 
 
+def test_slices_are_computed_once_and_handed_out_as_copies():
+    """The slices are cached per (n, switches): a caller that edits its dict changes
+    neither the next caller's nor another n's, and switches given in any order agree."""
+    layout = _layout()
+    first = layout.slices(2, first=True, second=True)
+    first["a"] = slice(7, 9)
+    del first["e"]
+    again = layout.slices(2, second=True, first=True)
+    assert again == {"a": slice(0, 1), "b": slice(1, 3), "c": slice(3, 4), "d": slice(4, 6),
+                     "e": slice(6, 7)}
+    assert layout.slices(3)["b"] == slice(1, 4) and layout.slices(2)["b"] == slice(1, 3)
+    with pytest.raises(ValueError, match="second"):  # a refused switch is never cached
+        layout.slices(2, second=True)
+    with pytest.raises(ValueError, match="second"):
+        layout.slices(2, second=True)
+
+
 def test_a_later_group_alone_is_rejected_naming_the_groups():
     """The offsets of 'second' count 'first': alone it would index past the row."""
     layout = _layout()

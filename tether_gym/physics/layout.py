@@ -107,6 +107,7 @@ class Layout:
                 c0 += 1
         index_type = namedtuple(name.title().replace("_", "") + "Index", names)  # type: ignore[misc]
         self._index = index_type(*offsets)
+        self._slices: dict[tuple, dict[str, slice]] = {}  # (n, switches) -> slices
 
     @property
     def index(self) -> Any:
@@ -165,13 +166,21 @@ class Layout:
         return sum(n if f.per_tether else 1 for f in self.selected(**switches))
 
     def slices(self, n: int, **switches: bool) -> dict[str, slice]:
-        """Slice of every present field in a row for n tethers."""
-        out = {}
-        for f in self.selected(**switches):
-            c0, c1 = getattr(self._index, f.name)
-            start = c0 + c1 * n
-            out[f.name] = slice(start, start + (n if f.per_tether else 1))
-        return out
+        """Slice of every present field in a row for n tethers (a new dict each call).
+
+        Computed once per (n, switches) and copied from then on: observation readers
+        call it at every control step.
+        """
+        key = (n, tuple(sorted(switches.items())))
+        known = self._slices.get(key)
+        if known is None:
+            known = {}
+            for f in self.selected(**switches):
+                c0, c1 = getattr(self._index, f.name)
+                start = c0 + c1 * n
+                known[f.name] = slice(start, start + (n if f.per_tether else 1))
+            self._slices[key] = known
+        return dict(known)
 
     def __repr__(self) -> str:
         return f"Layout({self.name!r}, {list(self.names)})"

@@ -10,6 +10,7 @@ import pytest
 
 import tether_gym
 from tether_gym_agents.evaluation.registry import (
+    FILTERED_OF,
     HANDOVER_OF,
     default_policies,
     make_policy,
@@ -42,7 +43,8 @@ RUN_FILES = ("command.txt", "train_info.json", AGENT_FILE, "policy.safetensors",
 
 def test_the_shipped_policies_are_there_without_pickles():
     assert {"ppo", "ppo_g025", "ppo_symlog", "smc_residual"} <= set(SHIPPED)
-    assert set(HANDOVER_OF) <= set(SHIPPED)
+    assert set(HANDOVER_OF) <= set(SHIPPED) and set(FILTERED_OF) <= set(SHIPPED)
+    assert {"handover:ppo", "filtered:distill_ppo"} <= set(default_policies())
     assert set(SHIPPED) <= set(default_policies())  # python evaluate.py runs each of them
     folders = {p.name for p in PRETRAINED_DIR.iterdir() if p.is_dir()}
     assert folders == set(SHIPPED)  # no folder that is not an agent
