@@ -6,17 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
-parts() {  # the parts of set A (even k), B (odd k) or both
-  for d in runs/distill_data/part_*/; do
-    k=${d#runs/distill_data/part_}; k=${k%/}
-    [ -f "$d/dagger_data.npz" ] || continue
-    case $1 in
-      A) ((k % 2 == 0)) && echo "$d/dagger_data.npz" ;;
-      B) ((k % 2 == 1)) && echo "$d/dagger_data.npz" ;;
-      AB) echo "$d/dagger_data.npz" ;;
-    esac
-  done
-}
+source experiments/issue36/set_a.sh   # parts A | B | AB
 fit=(--iterations 0 --epochs 40 --batch-size 2048 --check-episodes 0 --seed 0)
 case $1 in
   plain) args=(--data $(parts AB) "${fit[@]}") ;;

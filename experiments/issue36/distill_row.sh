@@ -16,11 +16,8 @@ export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 seed=$1
 bc=runs/row36/bc/seed_$seed
 ft=runs/distill_ppo/seed_$seed
-data=()
-for f in runs/distill_data/part_*/dagger_data.npz; do
-  k=${f#runs/distill_data/part_}; k=${k%%/*}
-  if ((10#$k % 2 == 0)); then data+=("$f"); fi
-done
+source experiments/issue36/set_a.sh   # parts A | B | AB
+mapfile -t data < <(parts A)
 if [ ! -f "$bc/agent.json" ]; then
   python train.py distill --data "${data[@]}" --iterations 0 --epochs 40 --batch-size 2048 \
     --check-episodes 0 --symlog-scale 1e-4 --seed "$seed" --out "$bc"
