@@ -149,6 +149,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="threshold tracking RMS [rad] (default 5.5e-3)")
     curves.add_argument("--success", type=float, default=0.99,
                         help="threshold success fraction (default 0.99)")
+    curves.add_argument("--filtered", action="store_true",
+                        help="score each checkpoint behind the safety filter, as "
+                             "filtered:RUN (rate-mode agents)")
     curves.add_argument("--out", required=True, help="output folder")
     dataset = sub.add_parser("dataset", help="Minari demonstration datasets of policies "
                                              "(the datasets extra; docs/datasets.md)",
@@ -292,7 +295,8 @@ def _curves(args: argparse.Namespace) -> int:
                 all_curves += load_curves(run, args.suite, args.seeds, threshold)
                 continue
             print(f"{run}: evaluating its checkpoints on suite {args.suite!r} ...")
-            all_curves.append(learning_curves(run, args.suite, args.seeds, threshold))
+            all_curves.append(learning_curves(run, args.suite, args.seeds, threshold,
+                                              filtered=args.filtered))
             print(markdown(all_curves[-1]))
     except ValueError as exc:
         print(f"evaluate.py: error: {exc}", file=sys.stderr)

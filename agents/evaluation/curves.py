@@ -45,9 +45,10 @@ from ..files.folder_paths import copy_files_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
 from .benchmark import EvalOptions, evaluate
+from .registry import FILTERED
 from .stats import iqm, run_scores, success_counts
 
-__all__ = ["Threshold", "learning_curves", "curve_points", "load_curves", "write_curves",
+__all__ = ["Threshold", "learning_curves", "curve_points", "load_curves", "write_curves", "label",
            "DEFAULT_THRESHOLD"]
 
 CURVES_FILE = "curves.json"
@@ -89,8 +90,13 @@ def curve_points(folder: Path) -> list[tuple[int, list[tuple[Path, float]]]]:
 
 
 def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
-                    threshold: Threshold = DEFAULT_THRESHOLD, log=print) -> dict:
+                    threshold: Threshold = DEFAULT_THRESHOLD, log=print,
+                    filtered: bool = False) -> dict:
     """Evaluate every common checkpoint of a folder of seed runs on ``suite``.
+
+    With ``filtered`` each checkpoint policy is scored behind the safety filter
+    (``filtered:`` + the checkpoint, as ``python evaluate.py filtered:RUN`` scores a
+    rate-mode agent), and the curve's policy is named ``filtered:FOLDER``.
 
     Returns ``{"policy", "suite", "seeds", "runs", "threshold", "points": [...],
     "reached": {...} or None, "per_seed": [...]}``; each point holds ``steps``,
@@ -109,7 +115,8 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
             for i, (agent, _) in enumerate(agents):  # one policy, one run per seed
                 copy_files_checked(agent, tmp / f"step_{steps}" / f"seed_{i}",
                                    (AGENT_FILE, WEIGHTS_FILE))
-            res = evaluate([str(tmp / f"step_{steps}")], suite, n_seeds, 0,
+            name = (FILTERED if filtered else "") + str(tmp / f"step_{steps}")
+            res = evaluate([name], suite, n_seeds, 0,
                            options=EvalOptions(out=None, plots=False, log=None))
             out.append(_point(res, steps, [w for _, w in agents]))
             if log:
@@ -119,7 +126,8 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     n_runs = len(points[0][1])
-    return {"policy": str(folder), "suite": suite, "seeds": n_seeds, "runs": n_runs,
+    return {"policy": (FILTERED if filtered else "") + str(folder), "suite": suite,
+            "seeds": n_seeds, "runs": n_runs,
             "points": out, **_at_threshold(out, n_runs, threshold)}
 
 
@@ -150,6 +158,13 @@ def load_curves(folder: Path, suite: str, n_seeds: int,
                              f"not on {suite!r} with {n_seeds} (give --suite and --seeds)")
         c.update(_at_threshold(c["points"], c["runs"], threshold))
     return curves
+
+
+def label(curve: dict) -> str:
+    """A curve's short name: its folder's name, ``filtered:`` kept in front."""
+    policy = str(curve["policy"])
+    prefix = FILTERED if policy.startswith(FILTERED) else ""
+    return prefix + Path(policy[len(prefix):]).name
 
 
 def _point(res: dict, steps: int, walls: list[float]) -> dict:
@@ -225,7 +240,7 @@ def summary_markdown(all_curves: list[dict]) -> str:
         when = ("not reached" if reached is None else
                 f"{_fmt((reached['wall_time_s_median'] or math.nan) / 60, '.1f')} min, "
                 f"{reached['steps']} steps")
-        lines.append(f"| {Path(c['policy']).name} | {c['runs']} | {last['steps']} | "
+        lines.append(f"| {label(c)} | {c['runs']} | {last['steps']} | "
                      f"{_minutes(last['wall_time_s'])} | {last['success']:.3f} "
                      f"({last['survived']}/{last['episodes']}) | "
                      f"{_rms_text(last)} | {when} | {_alone(c)} |")
@@ -285,12 +300,12 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
                         for p in pts])
         ci = np.array([(np.nan, np.nan) if p["tracking_rms_ci95"] is None
                        else p["tracking_rms_ci95"] for p in pts], dtype=float)
-        label = Path(c["policy"]).name
+        name = label(c)
         for ax, x in ((ax_steps, steps), (ax_wall, wall)):
-            ax.semilogy(x, rms, "-o", ms=3, color=f"C{k}", label=label)
+            ax.semilogy(x, rms, "-o", ms=3, color=f"C{k}", label=name)
             ax.fill_between(x, ci[:, 0], ci[:, 1], color=f"C{k}", alpha=0.25)
         ax_succ.plot(steps, [p["success"] for p in pts], "-o", ms=3, color=f"C{k}",
-                     label=label)
+                     label=name)
     th = all_curves[0]["threshold"] if all_curves else {"rms": math.nan, "success": math.nan}
     for ax in (ax_steps, ax_wall):
         ax.axhline(th["rms"], color="grey", ls="--", lw=1)

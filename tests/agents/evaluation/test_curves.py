@@ -100,3 +100,35 @@ def test_time_to_threshold_is_the_first_point_meeting_both():
                                     "wall_time_s_range": [50, 70]}
     assert _seed_reached(points, 0, th) == {"steps": 1, "wall_time_s": 10}
     assert _seed_reached(points, 1, th) is None  # never both, NaN never meets
+
+
+def test_filtered_curves_score_each_checkpoint_as_filtered_run_does(tmp_path):
+    """--filtered: every point is what ``evaluate.py filtered:FOLDER`` gives for that
+    checkpoint's seeds as one policy, and the curve is named ``filtered:``."""
+    import shutil
+
+    folder = tmp_path / "rate"
+    for seed in (0, 1):
+        assert train_main(["--seed", str(seed), "--out", str(folder / f"seed_{seed}"), *TINY,
+                           "action_mode=rate"]) == 0
+    out = tmp_path / "curves"
+    assert evaluate_main(["curves", str(folder), "--filtered", "--suite", "paper",
+                          "--seeds", "2", "--out", str(out)]) == 0
+    (curve,) = json.loads((out / "curves.json").read_text())
+    assert curve["policy"] == f"filtered:{folder}"
+    assert (out / "curves.md").read_text().startswith(f"filtered:{folder}")
+    last = curve["points"][-1]
+    step = tmp_path / "last"
+    for seed in (0, 1):
+        src = folder / f"seed_{seed}" / "checkpoints" / f"agent_{last['steps']}_steps"
+        shutil.copytree(src, step / f"seed_{seed}")
+    direct = tmp_path / "direct"
+    assert evaluate_main([f"filtered:{step}", "--suite", "paper", "--seeds", "2",
+                          "--no-plots", "--out", str(direct)]) == 0
+    (block,) = json.loads((direct / "results.json").read_text())["policies"].values()
+    assert block["kind"] == "hybrid"
+    assert last["survived"] == block["survived"] and last["episodes"] == block["n_episodes"]
+    if block["tracking_rms"] is None:
+        assert last["tracking_rms"] is None
+    else:
+        assert last["tracking_rms"] == pytest.approx(block["tracking_rms"], rel=1e-12)
