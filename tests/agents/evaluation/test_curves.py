@@ -132,3 +132,14 @@ def test_filtered_curves_score_each_checkpoint_as_filtered_run_does(tmp_path):
         assert last["tracking_rms"] is None
     else:
         assert last["tracking_rms"] == pytest.approx(block["tracking_rms"], rel=1e-12)
+
+
+def test_filtered_curves_refuse_increment_mode_runs_before_evaluating(two_seeds, tmp_path,
+                                                                      capsys):
+    out = tmp_path / "curves"
+    assert evaluate_main(["curves", str(two_seeds), "--filtered", "--suite", "paper",
+                          "--seeds", "1", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(two_seeds) in err and "action_mode='increment'" in err
+    assert "tether_curves" not in err  # names the user's folder, not a temporary copy
+    assert not out.exists()
