@@ -512,16 +512,17 @@ def start_from(settings: DaggerSettings, policy, obs_dim: int) -> TrainedAgent:
     spec = student_features(settings)
     mine = None if spec is None else FeatureSpec.from_dict(spec)
     if agent.features != mine:
-        raise InitPolicyError(f"{what}: its input features {agent.features} differ from the "
-                         f"student's {mine} (give --symlog-scale as the agent's)")
+        raise InitPolicyError(f"{what}: its input features {agent.features} differ from "
+                              f"the student's {mine} (give --symlog-scale as the agent's)")
     mode = agent.env_kwargs.get("action_mode")
     if mode != "rate":
-        raise InitPolicyError(f"{what}: trained with action_mode={mode!r}; the student commands "
-                         "reel rates (action_mode 'rate'), as mpc does")
+        raise InitPolicyError(f"{what}: trained with action_mode={mode!r}; the student "
+                              "commands reel rates (action_mode 'rate'), as mpc does")
     n_inputs = obs_dim + (0 if mine is None else mine.size(policy.action_space.shape[0]))
     if agent.norm is None or agent.norm.mean.shape != (n_inputs,):
         have = "no" if agent.norm is None else f"{agent.norm.mean.shape[0]}"
-        raise InitPolicyError(f"{what}: {have} normalised inputs; the student has {n_inputs}")
+        raise InitPolicyError(f"{what}: {have} normalised inputs; the student has "
+                              f"{n_inputs}")
     try:
         copy_actor(agent.model, policy, what, "--net-arch")
     except ValueError as exc:
@@ -615,7 +616,11 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
     check_seeds = [int(s) for s in rng.integers(0, 2**31 - 1, settings.check_episodes)]
     policy = make_student(check_env, settings)
     obs_dim, act_dim = env_config(check_env).obs_dim, env_config(check_env).n_tethers
-    start = None if settings.init_policy is None else start_from(settings, policy, obs_dim)
+    try:
+        start = None if settings.init_policy is None else start_from(settings, policy, obs_dim)
+    except InitPolicyError:
+        check_env.close()
+        raise
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     write_config(out, {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
