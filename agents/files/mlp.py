@@ -16,8 +16,8 @@ eight interleaved partial sums combined as ((r0 + r1) + (r2 + r3)) + ((r4 + r5) 
 to a multiple of 8) and the halves' sums added, and the reduction starts from 0.
 :func:`_linear` does exactly this in compiled loops that vectorise over the outputs
 (bitwise equal to the NumPy expression, tests/agents/files/test_mlp.py) and
-needs no (batch, out, in) temporary: 4-15 times faster for 256-wide layers
-(bench/README.md). The split is a plan computed in Python (:func:`_plan`), so that the
+needs no (batch, out, in) temporary: 3-12 times faster for 256-wide layers at batches of
+1-70 (bench/README.md). The split is a plan computed in Python (:func:`_plan`), so that the
 compiled functions do not recurse and numba can cache them (``cache=True``, beside this
 file or in numba's user cache: about 2-3 s to compile once, 0.4 s to load).
 

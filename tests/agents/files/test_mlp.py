@@ -47,6 +47,29 @@ def test_unsupported_networks_fall_back():
     assert NumpyMLP.from_policy(model.policy) is None
 
 
+def _pairwise(terms: list[float]) -> float:
+    """The module docstring's summation order: NumPy's pairwise sum, in plain Python."""
+    n = len(terms)
+    if n < 8:
+        total = -0.0
+        for t in terms:
+            total += t
+        return total
+    if n <= 128:
+        r = terms[:8]
+        i = 8
+        while i < n - n % 8:
+            r = [r[k] + terms[i + k] for k in range(8)]
+            i += 8
+        total = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+        for t in terms[i:]:
+            total += t
+        return total
+    half = n // 2
+    half -= half % 8
+    return _pairwise(terms[:half]) + _pairwise(terms[half:])
+
+
 @pytest.mark.parametrize("n_in", [1, 3, 7, 8, 9, 20, 24, 64, 127, 128, 129, 136, 256, 257,
                                   300, 512, 1000])
 def test_compiled_dot_products_sum_in_numpys_pairwise_order(n_in):
@@ -63,6 +86,9 @@ def test_compiled_dot_products_sum_in_numpys_pairwise_order(n_in):
         got = pairwise_linear(h, w)
         assert got.dtype == np.float64 and got.shape == expected.shape
         assert np.array_equal(got, expected)
+        # the documented order written out in Python, independently of NumPy's version
+        reference = np.array([[0.0 + _pairwise(list(row * col)) for col in w] for row in h])
+        assert np.array_equal(got, reference)
         # a plain matrix product sums in another order: the test can tell them apart
         if n_in >= 20 and scale == 1.0:
             assert not np.array_equal(h @ w.T, expected)
