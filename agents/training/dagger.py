@@ -77,7 +77,7 @@ from ..files.run_folder import (
 )
 from ..files.safe_format import AgentLoadError, ObsNormalization, save_agent
 from ..files.trained import TrainedAgent
-from .config import training_distribution
+from .config import ConfigError, training_distribution
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "start_from",
@@ -474,6 +474,11 @@ class InitPolicyError(ValueError):
     """``init_policy`` names an agent that cannot start the student (:func:`start_from`)."""
 
 
+_DISTILL_HINTS = {"features": "give --symlog-scale as the agent's",
+                  "action_mode": "the student commands reel rates, as mpc does"}
+"""What ``train.py distill`` changes to fit an agent (``check_agent_fits``' hints)."""
+
+
 def start_from(settings: DaggerSettings, policy, obs_dim: int) -> TrainedAgent:
     """Load ``settings.init_policy``, check that it fits the student, copy its actor in.
 
@@ -497,35 +502,24 @@ def start_from(settings: DaggerSettings, policy, obs_dim: int) -> TrainedAgent:
         Naming the agent and what does not fit (algorithm, hybrid, features, action
         mode, normalisation, input count, layer widths or activation).
     """
-    from .warm_start import agent_location, copy_actor, init_policy_for
+    from .warm_start import agent_location, check_agent_fits, copy_actor, init_policy_for
 
     value = init_policy_for(str(settings.init_policy), settings.seed)
     what = f"init_policy {value!r}"
+    spec = student_features(settings)
+    mine = None if spec is None else FeatureSpec.from_dict(spec)
+    n_inputs = obs_dim + (0 if mine is None else mine.size(policy.action_space.shape[0]))
     try:
         agent = TrainedAgent.load(agent_location(value))  # safe files only, no pickle
     except AgentLoadError as exc:
         raise InitPolicyError(f"{what}: {exc}") from None
-    if agent.algo != ALGO or agent.hybrid is not None:
-        kind = f"{agent.algo} agent" + (" of a hybrid" if agent.hybrid else "")
-        raise InitPolicyError(f"{what}: a {kind}; only a ppo agent that acts alone can "
-                              "start the student")
-    spec = student_features(settings)
-    mine = None if spec is None else FeatureSpec.from_dict(spec)
-    if agent.features != mine:
-        raise InitPolicyError(f"{what}: its input features {agent.features} differ from "
-                              f"the student's {mine} (give --symlog-scale as the agent's)")
-    mode = agent.env_kwargs.get("action_mode")
-    if mode != "rate":
-        raise InitPolicyError(f"{what}: trained with action_mode={mode!r}; the student "
-                              "commands reel rates (action_mode 'rate'), as mpc does")
-    n_inputs = obs_dim + (0 if mine is None else mine.size(policy.action_space.shape[0]))
-    if agent.norm is None or agent.norm.mean.shape != (n_inputs,):
-        have = "no" if agent.norm is None else f"{agent.norm.mean.shape[0]}"
-        raise InitPolicyError(f"{what}: {have} normalised inputs; the student has "
-                              f"{n_inputs}")
-    try:
+    try:  # the checks train.py's init_policy makes, then the student's own
+        check_agent_fits(agent, what, mine, {"action_mode": "rate"}, True, _DISTILL_HINTS)
+        if agent.norm is not None and agent.norm.mean.shape != (n_inputs,):
+            raise ConfigError(f"{what}: {agent.norm.mean.shape[0]} normalised inputs; the "
+                              f"student has {n_inputs}")
         copy_actor(agent.model, policy, what, "--net-arch")
-    except ValueError as exc:
+    except ConfigError as exc:
         raise InitPolicyError(str(exc)) from None
     return agent
 

@@ -39,9 +39,8 @@ from ..files.trained import TrainedAgent, pretrained_agents
 from .config import ConfigError
 
 __all__ = ["INIT_KEY", "SEED_FIELD", "ACTOR_MODULES", "check_init_policy", "init_policy_for",
-           "agent_location", "copy_actor", "warm_start", "init_path",
-           "freeze_obs_stats",
-           "FrozenRunningMeanStd"]
+           "agent_location", "check_agent_fits", "CONFIG_HINTS", "copy_actor", "warm_start",
+           "init_path", "freeze_obs_stats", "FrozenRunningMeanStd"]
 
 INIT_KEY = "init_policy"
 """The config key (one of :data:`~.config.RUN_KEYS`)."""
@@ -121,7 +120,42 @@ def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
                           f"--algo {algo} is not one of {list(_ON_POLICY)}")
     value = init_policy_for(value, seed)
     agent = _load(value, source)
-    what = f"{source}: {INIT_KEY} {value!r}"
+    check_agent_fits(agent, f"{source}: {INIT_KEY} {value!r}", features, env_kwargs,
+                     normalize, CONFIG_HINTS)
+    return value
+
+
+CONFIG_HINTS = {"features": "set the config's features to the agent's",
+                "action_mode": "set env_kwargs.action_mode: {theirs}"}
+"""What a ``train.py`` config changes to fit an agent (:func:`check_agent_fits`)."""
+
+
+def check_agent_fits(agent: TrainedAgent, what: str, features, env_kwargs: dict, normalize,
+                     hints: dict[str, str]) -> None:
+    """Refuse an agent whose actor would see other inputs or act in other units than the run's.
+
+    Parameters
+    ----------
+    agent : TrainedAgent
+        The agent that is to start the run's actor.
+    what : str
+        Names the agent, for messages.
+    features : FeatureSpec or None
+        The run's input features.
+    env_kwargs : dict
+        The run's env kwargs (``action_mode``).
+    normalize : bool or dict
+        The run's ``normalize`` (observation normalisation on or off).
+    hints : dict
+        ``"features"`` and ``"action_mode"``: what the user changes to fit the agent
+        (``{theirs}`` in the second stands for the agent's action mode).
+
+    Raises
+    ------
+    ConfigError
+        For another algorithm than ppo, the residual of a hybrid, other input features,
+        another action mode, or normalisation in one and not in the other.
+    """
     if agent.algo != "ppo":
         raise ConfigError(f"{what}: a {agent.algo} agent; only a ppo agent's actor "
                           "(ActorCriticPolicy) can start the run")
@@ -130,19 +164,18 @@ def check_init_policy(value, source: str, algo: str, features, env_kwargs: dict,
                           "that acts alone")
     if agent.features != features:
         raise ConfigError(f"{what}: its input features {agent.features} differ from the "
-                          f"run's {features} (set the config's features to the agent's)")
+                          f"run's {features} ({hints['features']})")
     mine = env_kwargs.get("action_mode", INCREMENT)
     theirs = agent.env_kwargs.get("action_mode", INCREMENT)
     if mine != theirs:
         raise ConfigError(f"{what}: trained with action_mode={theirs!r}, the run has "
-                          f"{mine!r} (set env_kwargs.action_mode: {theirs})")
+                          f"{mine!r} ({hints['action_mode'].format(theirs=theirs)})")
     norm_obs = normalize is True or (isinstance(normalize, dict)
                                      and normalize.get("norm_obs", True))
     if (agent.norm is not None) != bool(norm_obs):
         have = "normalises" if agent.norm is not None else "does not normalise"
         raise ConfigError(f"{what}: the agent {have} its observations, the run's normalize "
                           f"is {normalize!r}; they must agree")
-    return value
 
 
 def copy_actor(theirs, mine, what: str, widths: str) -> None:
