@@ -41,13 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
-from tether_gym.envs.actions import INCREMENT
-
 from ..files.folder_paths import copy_files_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
 from .benchmark import EvalOptions, evaluate
-from .registry import FILTERED
+from .registry import FILTERED, resolve_policy
 from .stats import iqm, run_scores, success_counts
 
 __all__ = ["Threshold", "learning_curves", "curve_points", "load_curves", "write_curves", "label",
@@ -110,15 +108,9 @@ def learning_curves(folder: Path, suite: str = "default", n_seeds: int = 10,
     if not points:
         raise ValueError(f"{folder}: no checkpoint agents (checkpoints/agent_<N>_steps/) "
                          "that every seed run has; train with this version of train.py")
-    if filtered:  # the filter corrects reel rates: refuse other runs before evaluating
-        from ..files.trained import TrainedAgent
-
-        mode = TrainedAgent.load(points[0][1][0][0]).env_kwargs.get("action_mode",
-                                                                   INCREMENT)
-        if mode != "rate":
-            raise ValueError(f"{folder}: --filtered scores rate-mode agents behind the "
-                             f"safety filter; its runs were trained with "
-                             f"action_mode={mode!r}")
+    if filtered:  # the filtered form's own check (rate-mode runs only), before evaluating,
+        # on a checkpoint where the user finds it rather than on the temporary copy below
+        _ = resolve_policy(FILTERED + str(points[0][1][0][0])).env_kwargs
     out = []
     tmp = Path(tempfile.mkdtemp(prefix="tether_curves_"))
     try:
