@@ -576,6 +576,16 @@ def fit_student(policy, data: Dataset, norm: ObsNormalization, settings: DaggerS
 
 
 # ---------------------------------------------------------------------------- loop
+def _flier(policy, norm, settings: DaggerSettings) -> Callable[[np.ndarray], np.ndarray]:
+    """``student(obs) -> action``: the network's deterministic action, as its agent acts."""
+    agent = TrainedAgent(policy, norm, algo=ALGO, features=student_features(settings))
+
+    def student(obs):
+        return agent.predict(obs, deterministic=True)[0]
+
+    return student
+
+
 def _save(folder: Path, policy, norm, env_kwargs: dict, training: dict,
           features: dict | None) -> None:
     save_agent(folder, policy, ALGO, norm, env_id=tether_gym.ENV_ID, env_kwargs=env_kwargs,
@@ -624,11 +634,8 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         append_command(out, command)
     generator = torch.Generator().manual_seed(settings.seed)
     data = Dataset.empty(obs_dim, act_dim)
-    student = None
-    if start is not None:  # the starting policy flies from iteration 1 on, its statistics kept
-        first = TrainedAgent(policy, start.norm, algo=ALGO, features=student_features(settings))
-        def student(o, agent=first):
-            return agent.predict(o, deterministic=True)[0]
+    kept = None if start is None else start.norm  # the starting policy's statistics, fixed
+    student = None if start is None else _flier(policy, kept, settings)  # flies iteration 1
     history: list[dict] = []
     label_time = 0.0
     number = 0
@@ -665,12 +672,10 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
                 "mixture_seed": mix_seed})
             env.close()
             number += 1
-        norm = (start.norm if start is not None and start.norm is not None  # kept
+        norm = (kept if kept is not None
                 else normalization(student_inputs(settings, data.obs, act_dim)))
         loss = fit_student(policy, data, norm, settings, generator) if len(data) else None
-        agent = TrainedAgent(policy, norm, algo=ALGO, features=student_features(settings))
-        def student(o, agent=agent):
-            return agent.predict(o, deterministic=True)[0]
+        student = _flier(policy, norm, settings)
         checks = [rollout(check_env, s, student=student) for s in check_seeds]
         wall = time.perf_counter() - t0
         rms = [c.tracking_rms for c in checks if c.tracking_rms is not None]
