@@ -1,12 +1,15 @@
 """Env throughput of the torch path (TorchTetherVecEnv) beside the numba vector env.
 
     python bench/gpu_throughput.py --device cuda --envs 4096 65536 262144 1048576 --out F.json
+    python bench/gpu_throughput.py --device cuda --envs 65536 1048576 --backend torch numba-cuda
     python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba      # the CPU ratio
 
 For each batch size: env steps per second of ``TorchTetherVecEnv.step`` (N = 3,
 float64, the ppo training distribution's env kwargs, zero actions, autoreset on), after
 warm-up steps, timed over whole steps with the device synchronised. ``--numba`` times
 the native vector env (``gym.make_vec``, one thread) at the same sizes in the same run;
+``--backend torch numba-cuda`` times both backends of the env (``reset_s``: construction
+and first reset, which includes numba-cuda's compile of the step kernel on a cold cache);
 ``--numba-cuda`` probes whether numba-cuda compiles the existing numba kernel
 (``tether_gym.physics.kernels.advance_one``) into a CUDA kernel, and times it when it
 does. Prints one line per measurement and writes them as JSON.
@@ -36,14 +39,17 @@ def _sync(device):
         torch.cuda.synchronize(device)
 
 
-def torch_rate(num, device, steps, warmup=3, mode="same_step"):
+def torch_rate(num, device, steps, warmup=3, mode="same_step", backend="torch"):
     import torch
 
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
+    t = time.perf_counter()
     env = TorchTetherVecEnv(num, device=device, seed=0, autoreset_mode=mode,
-                            check_actions=False, **ENV_KWARGS)
+                            check_actions=False, backend=backend, **ENV_KWARGS)
     env.reset()
+    _sync(env.device)
+    start = time.perf_counter() - t
     a = torch.zeros((num, env.n), dtype=torch.float64, device=env.device)
     for _ in range(warmup):
         env.step(a)
@@ -53,8 +59,8 @@ def torch_rate(num, device, steps, warmup=3, mode="same_step"):
         env.step(a)
     _sync(env.device)
     dt = (time.perf_counter() - t) / steps
-    return {"what": "torch", "device": str(env.device), "envs": num, "ms_per_step": dt * 1e3,
-            "env_steps_per_s": num / dt}
+    return {"what": f"TorchTetherVecEnv backend={backend}", "device": str(env.device),
+            "envs": num, "reset_s": start, "ms_per_step": dt * 1e3, "env_steps_per_s": num / dt}
 
 
 def compiled_rate(num, device, steps):
@@ -104,7 +110,7 @@ def numba_rate(num, steps, warmup=3):
 
     import tether_gym  # noqa: F401
 
-    venv = gym.make_vec("tether_gym/TetherLibration-v1", num_envs=num,
+    venv = gym.make_vec(tether_gym.ENV_ID, num_envs=num,
                         vectorization_mode="vector_entry_point", parallel=False, **ENV_KWARGS)
     venv.reset(seed=0)
     a = np.zeros((num, 2))
@@ -121,15 +127,13 @@ def numba_rate(num, steps, warmup=3):
 def numba_cuda_probe(num):
     """Compile a CUDA kernel that calls the existing numba step of one chain per thread."""
     out = {"what": "numba-cuda probe", "envs": num}
-    if not hasattr(np, "row_stack"):  # removed in numpy 2.5; numba-cuda 0.2x still calls it
-        np.vstack = np.vstack
-        out["shim"] = "np.row_stack = np.vstack"
+    if not hasattr(np, "row_stack"):
+        out["shim"] = "np.row_stack = np.vstack"  # as tether_gym_agents.accel.numba_cuda does
     try:
-        from numba import cuda
-
         from tether_gym.envs.config import EnvConfig
         from tether_gym.physics import kernels
         from tether_gym.physics.kernels import Scratch, StepInputs, StepOutputs, Substeps
+        from tether_gym_agents.accel.numba_cuda import cuda  # with its numpy shim
 
         out["numba_cuda"] = getattr(cuda, "__version__", "?")
         config = EnvConfig.from_kwargs()
@@ -180,6 +184,8 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cpu")
     p.add_argument("--envs", type=int, nargs="+", default=[256, 4096])
     p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--backend", nargs="+", default=["torch"], choices=["torch", "numba-cuda"],
+                   help="TorchTetherVecEnv backends to time (numba-cuda: CUDA devices only)")
     p.add_argument("--numba", action="store_true")
     p.add_argument("--numba-cuda", action="store_true")
     p.add_argument("--compile", action="store_true", help="also time the torch.compile'd core")
@@ -197,9 +203,10 @@ def main(argv=None) -> int:
             "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None}
     print(json.dumps(meta))
     for num in args.envs:
-        row = torch_rate(num, device, args.steps)
-        rows.append(row)
-        print(json.dumps(row), flush=True)
+        for backend in args.backend:
+            row = torch_rate(num, device, args.steps, backend=backend)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
         if args.numba:
             row = numba_rate(num, args.steps)
             rows.append(row)

@@ -132,6 +132,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", type=Path, default=Path("runs/ppo_gpu"), help="output folder")
     p.add_argument("--compile", action="store_true",
                    help="fuse the env's step with torch.compile (compiles at the first step)")
+    p.add_argument("--backend", default="torch",
+                   help="the env's step: torch (default: torch operations) or numba-cuda (the "
+                        "numba env's own row step compiled for the GPU; docs/gpu.md)")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -152,7 +155,7 @@ def main(argv=None, clock_start: float | None = None) -> int:
     from dataclasses import replace
 
     from .trainer import GpuRun, train_seeds
-    from .vec_env import resolve_device
+    from .vec_env import check_backend, resolve_device
 
     try:
         settings, steps, env_kwargs, checkpoints = read_config(args.config)
@@ -173,7 +176,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
         max_seconds = (math.inf if args.max_seconds is None else
                        _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
         device = resolve_device(args.device)
-    except ValueError as exc:
+        check_backend(args.backend, device, compile=args.compile)
+    except (ValueError, ImportError) as exc:
         print(f"train.py gpu: error: {exc}", file=sys.stderr)
         return 2
     seeds = list(range(args.seed, args.seed + args.seeds))
@@ -183,7 +187,7 @@ def main(argv=None, clock_start: float | None = None) -> int:
     summary = train_seeds(settings, GpuRun(seeds, steps, env_kwargs, args.out, device,
                                            checkpoints=checkpoints, command=command,
                                            clock_start=start, max_seconds=max_seconds,
-                                           compile=args.compile))
+                                           compile=args.compile, backend=args.backend))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

@@ -76,7 +76,8 @@ class GpuRun:
     after the first update that ends later than this wall time [s] (counted from
     ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
-    ``compile``: the env's step through ``torch.compile`` (:class:`TorchTetherVecEnv`).
+    ``compile``: the env's step through ``torch.compile``; ``backend``: the env's step
+    backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend).
     """
 
     seeds: list[int]
@@ -90,6 +91,7 @@ class GpuRun:
     max_seconds: float = math.inf
     eval_episodes: int = 64
     compile: bool = False
+    backend: str = "torch"
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -107,7 +109,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     torch.manual_seed(int(seeds[0]))
     env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
                             autoreset_mode="same_step", check_actions=False,
-                            compile=run.compile, **env_kwargs)
+                            compile=run.compile, backend=run.backend, **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's step size scales its gradient instead (see _update), so that the

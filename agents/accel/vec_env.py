@@ -26,7 +26,12 @@ from tether_gym.tasks.termination import TUMBLE_ANGLE, Failure
 
 from . import chain
 
-__all__ = ["TorchTetherVecEnv", "chain_consts", "resolve_device", "AUTORESET_MODES"]
+__all__ = ["TorchTetherVecEnv", "chain_consts", "resolve_device", "AUTORESET_MODES",
+           "BACKENDS", "check_backend"]
+
+BACKENDS = ("torch", "numba-cuda")
+"""``torch``: the step as torch operations (:mod:`.chain`), on any device; ``numba-cuda``:
+the numba env's own row step compiled for a CUDA GPU (:mod:`.numba_cuda`)."""
 
 AUTORESET_MODES = ("next_step", "same_step")
 """``next_step``: gymnasium's default, as the native vector env; ``same_step``: an ended
@@ -58,6 +63,25 @@ def resolve_device(device) -> torch.device:
     if dev.type not in ("cpu", "cuda"):
         raise ValueError(f"device={device!r}: only 'cpu' and 'cuda' devices are supported")
     return dev
+
+
+def check_backend(backend: str, device: torch.device, dtype=torch.float64,
+                  compile: bool = False) -> None:
+    """A ValueError unless ``backend`` (:data:`BACKENDS`) can run with these settings.
+
+    ``numba-cuda`` runs the numba kernel in float64 on a CUDA device and compiles it
+    itself (no ``compile``).
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r} must be one of {BACKENDS}")
+    if backend == "numba-cuda":
+        if compile or dtype != torch.float64:
+            raise ValueError(f'backend="numba-cuda" runs the numba kernel in float64 and '
+                             f"compiles it itself: compile={compile!r} must be False and "
+                             f"dtype={dtype!r} torch.float64")
+        from .numba_cuda import check_device
+
+        check_device(device)
 
 
 def chain_consts(config: EnvConfig, device, dtype=torch.float64) -> chain.ChainConsts:
@@ -141,12 +165,17 @@ class TorchTetherVecEnv:
     False: a NaN action turns its row's state non-finite, which terminates it as
     ``"nonfinite"``), ``compile`` (True: the step's arithmetic, :func:`~.chain.control_step`,
     runs through ``torch.compile``, fused into few kernels; its first step compiles, tens
-    of seconds), and every keyword argument of ``gym.make``.
+    of seconds), ``backend`` (``"torch"``, default: the step as torch operations;
+    ``"numba-cuda"``: the step and the reset's evaluation by the numba env's own row
+    code, :func:`tether_gym.envs.step_kernel.step_row`, compiled for the GPU by
+    numba-cuda, one kernel launch per step; CUDA devices only, float64, no
+    ``compile``; the draws and the autoreset stay torch's), and every keyword argument
+    of ``gym.make``.
     """
 
     def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
                  autoreset_mode: str = "next_step", check_actions: bool = True,
-                 compile: bool = False, **env_kwargs):
+                 compile: bool = False, backend: str = "torch", **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
                             f"{num_envs!r}")
@@ -163,6 +192,7 @@ class TorchTetherVecEnv:
         self.config = EnvConfig.from_kwargs(**env_kwargs)
         check_startable(self.config)
         self.device = resolve_device(device)
+        check_backend(backend, self.device, dtype, compile)
         self.dtype = dtype
         self.num_envs = int(num_envs)
         self.autoreset_mode = autoreset_mode
@@ -175,8 +205,17 @@ class TorchTetherVecEnv:
         def control_step(*tensors):
             return chain.control_step(*tensors, cc)
 
-        self._control_step = (torch.compile(control_step, dynamic=False) if compile
-                              else control_step)
+        self.backend = backend
+        self._kernel: Any = None  # the numba-cuda step, with backend "numba-cuda"
+        self._control_step: Any
+        if backend == "numba-cuda":
+            from .numba_cuda import NumbaCudaStep
+
+            self._kernel = NumbaCudaStep(self.config, self.num_envs, self.device)
+            self._control_step = self._kernel
+        else:
+            self._control_step = (torch.compile(control_step, dynamic=False) if compile
+                                  else control_step)
         self._plan = StartPlan.of(self.config)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
@@ -304,14 +343,18 @@ class TorchTetherVecEnv:
         y = torch.cat([start, dlength], dim=1)
         noise = (self._bias.expand(count, -1) if draws["gauss"] is None
                  else plan.obs_noise * draws["gauss"] + self._bias)
-        _, res = chain.advance(nu0, y, dlength, torch.zeros_like(length), par, cc, 0)
-        u = torch.clamp(dlength / cc.max_reel_rate, -1.0, 1.0)
+        if self._kernel is not None:
+            out = self._kernel.evaluate(nu0, y, noise, par)
+        else:
+            _, res = chain.advance(nu0, y, dlength, torch.zeros_like(length), par, cc, 0)
+            u = torch.clamp(dlength / cc.max_reel_rate, -1.0, 1.0)
+            out = {"u": u, "tension": res.tension, "tension_min": res.tension_min,
+                   "derivative": res.derivative,
+                   "obs": chain.observation(nu0, y, noise, par, u, cc)}
         ok = ((y > self._state_low) & (y < self._state_high)).all(dim=1)
-        ok &= ((res.tension > 0.0) & (res.tension < math.inf)).all(dim=1)
-        return {"nu": nu0, "y": y, "par": par, "noise": noise, "u": u,
-                "nu_end": nu0 + plan.episode_length, "tension": res.tension,
-                "tension_min": res.tension_min, "derivative": res.derivative,
-                "obs": chain.observation(nu0, y, noise, par, u, cc), "ok": ok}
+        ok &= ((out["tension"] > 0.0) & (out["tension"] < math.inf)).all(dim=1)
+        return {"nu": nu0, "y": y, "par": par, "noise": noise,
+                "nu_end": nu0 + plan.episode_length, "ok": ok, **out}
 
     def _param_rows(self, ecc: torch.Tensor, masses: torch.Tensor) -> torch.Tensor:
         """Parameter rows for e (B,) and masses (B, n) (``pack_params`` of ``tail_masses``)."""

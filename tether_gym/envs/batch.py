@@ -26,7 +26,7 @@ import numpy as np
 
 from ..physics.dispatch import Direct
 from ..physics.kernels import Substeps
-from ..physics.state import STATE
+from ..physics.state import PARAMS, STATE
 from ..tasks.cost import COST_NAMES, cost_terms
 from ..tasks.reference import (
     desired_libration,
@@ -109,6 +109,30 @@ def check_options(options, config: EnvConfig) -> dict:
         raise ValueError(f"options['length']={options['length']!r} must lie inside "
                          f"length_bounds=({lo:g}, {hi:g})")
     return out
+
+
+def zero_rows(config: EnvConfig, num: int, zeros: Callable) -> Rows:
+    """The per-row arrays of ``num`` rows (:class:`Rows`), zeroed: their one declaration.
+
+    ``zeros(shape, dtype)`` allocates one array (``np.zeros``, or an allocator on
+    another device); dtypes are numpy's: float64, float32 (the observation), int64
+    (failure codes, step counts) and bool (truncation).
+    """
+    n = config.n_tethers
+    m = STATE.size(n)
+    f8 = np.dtype(np.float64)
+    return Rows(
+        nu=zeros((num,), f8), y=zeros((num, m), f8), par=zeros((num, PARAMS.size(n)), f8),
+        disturbance=zeros((num, n), f8), noise=zeros((num, m), f8),
+        obs=zeros((num, config.obs_dim), np.dtype(np.float32)),
+        reward=zeros((num,), f8), components=zeros((num, len(COMPONENTS)), f8),
+        cost=zeros((num, len(COST_NAMES)), f8),
+        failure=zeros((num,), np.dtype(np.int64)),
+        tension_min=zeros((num, n), f8), tension=zeros((num, n), f8),
+        derivative=zeros((num, m), f8),
+        info_s=zeros((N_INFO_SCALARS, num), f8), info_v=zeros((N_INFO_VECTORS, num, n), f8),
+        steps=zeros((num,), np.dtype(np.int64)), nu_end=zeros((num,), f8),
+        truncated=zeros((num,), np.dtype(np.bool_)), command=zeros((num, n), f8))
 
 
 def step_config(config: EnvConfig) -> StepConfig:
@@ -292,19 +316,9 @@ class ChainBatch:
         m = STATE.size(n)
         self._bias = _obs_bias(config)
         self._par_nominal = config.param_rows(config.eccentricity, config.masses)
-        self.rows = Rows(
-            nu=np.zeros(num), y=np.zeros((num, m)),
-            par=np.tile(self._par_nominal, (num, 1)),
-            disturbance=np.zeros((num, n)), noise=np.tile(self._bias, (num, 1)),
-            obs=np.zeros((num, config.obs_dim), dtype=np.float32),
-            reward=np.zeros(num), components=np.zeros((num, len(COMPONENTS))),
-            cost=np.zeros((num, len(COST_NAMES))),
-            failure=np.zeros(num, dtype=np.int64),
-            tension_min=np.zeros((num, n)), tension=np.zeros((num, n)),
-            derivative=np.zeros((num, m)),
-            info_s=np.zeros((N_INFO_SCALARS, num)), info_v=np.zeros((N_INFO_VECTORS, num, n)),
-            steps=np.zeros(num, dtype=np.int64), nu_end=np.zeros(num),
-            truncated=np.zeros(num, dtype=np.bool_), command=np.zeros((num, n)))
+        self.rows = zero_rows(config, num, np.zeros)
+        self.rows.par[:] = self._par_nominal
+        self.rows.noise[:] = self._bias
         self.cfg = step_config(config)
         self._plan = StartPlan.of(config)
         self._random_step = config.disturbance > 0.0 or config.obs_noise > 0.0

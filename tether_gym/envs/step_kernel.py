@@ -234,6 +234,47 @@ def first_bad_action(index, lo, hi, action, n):
     return -1
 
 
+@njit(**INLINE)
+def step_row(b, action, rows, cfg, work, reset):
+    """One control step of row b in place (or, with ``reset``, its evaluation at reset).
+
+    The row code of :func:`step_rows`, which documents it; ``work`` is the calling
+    thread's scratch. Also compiled for a CUDA GPU by numba-cuda, one row per thread
+    (``bench/numba_cuda_ptx.py``).
+    """
+    m = rows.y.shape[1]
+    n = m // 4
+    yb = rows.y[b]
+    pb = rows.par[0] if rows.par.shape[0] == 1 else rows.par[b]
+    out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
+    if reset:  # evaluate only: the reels hold their rate, no disturbance
+        for j in range(n):
+            work.command[j] = yb[at(S.dlength, n) + j]
+            rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0), 1.0)
+        inputs = kernels.StepInputs(work.command, work.zero)
+        substeps = kernels.Substeps(cfg.substeps.h, 0)
+    else:
+        for k in range(m):
+            work.previous[k] = yb[k]
+        for j in range(n):
+            a = next_command(rows.command[b, j], action[b, j], cfg.incremental,
+                             cfg.increment_gain)
+            rows.command[b, j] = a
+            work.command[j] = a * cfg.max_reel_rate
+        inputs = kernels.StepInputs(work.command, rows.disturbance[b])
+        substeps = cfg.substeps
+    rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps,
+                                     work.physics, out)
+    anomaly = anomaly_terms(rows.nu[b], cfg, work.physics.orbit)
+    if reset:
+        rows.steps[b] = 0
+    else:
+        rows.steps[b] += 1
+        _task(b, cfg, work, rows, anomaly)
+    rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
+    write_outputs(b, rows, cfg, anomaly)
+
+
 @njit(nogil=True, **LOOP)
 def step_rows(index, action, rows, cfg, work, reset, relay):
     """One control step of the rows listed in ``index`` (int64), in place; others untouched.
@@ -260,10 +301,7 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
     when no job came for ``polls`` polls or ``STOP`` is set. Serving lives here, around
     the one copy of the row code, so that the step is compiled once.
     """
-    m = rows.y.shape[1]
-    n = m // 4
-    no_steps = kernels.Substeps(cfg.substeps.h, 0)
-    shared = rows.par.shape[0] == 1
+    n = rows.y.shape[1] // 4
     ctl = relay.ctl
     serving = relay.polls > 0
     seen = ctl[DONE]
@@ -279,37 +317,7 @@ def step_rows(index, action, rows, cfg, work, reset, relay):
             hi = ctl[HI]
         bad = -1 if reset else first_bad_action(index, lo, hi, action, n)
         for i in range(lo, hi if bad < 0 else lo):
-            b = index[i]
-            yb = rows.y[b]
-            pb = rows.par[0] if shared else rows.par[b]
-            out = kernels.StepOutputs(rows.tension_min[b], rows.derivative[b], rows.tension[b])
-            if reset:  # evaluate only: the reels hold their rate, no disturbance
-                for j in range(n):
-                    work.command[j] = yb[at(S.dlength, n) + j]
-                    rows.command[b, j] = min(max(work.command[j] / cfg.max_reel_rate, -1.0),
-                                             1.0)
-                inputs = kernels.StepInputs(work.command, work.zero)
-                substeps = no_steps
-            else:
-                for k in range(m):
-                    work.previous[k] = yb[k]
-                for j in range(n):
-                    a = next_command(rows.command[b, j], action[b, j], cfg.incremental,
-                                     cfg.increment_gain)
-                    rows.command[b, j] = a
-                    work.command[j] = a * cfg.max_reel_rate
-                inputs = kernels.StepInputs(work.command, rows.disturbance[b])
-                substeps = cfg.substeps
-            rows.nu[b] = kernels.advance_one(rows.nu[b], yb, inputs, pb, substeps,
-                                             work.physics, out)
-            anomaly = anomaly_terms(rows.nu[b], cfg, work.physics.orbit)
-            if reset:
-                rows.steps[b] = 0
-            else:
-                rows.steps[b] += 1
-                _task(b, cfg, work, rows, anomaly)
-            rows.truncated[b] = rows.nu[b] >= rows.nu_end[b] - 1e-9
-            write_outputs(b, rows, cfg, anomaly)
+            step_row(index[i], action, rows, cfg, work, reset)
         if not serving:
             return bad
         call_address(relay.give_up)  # a compiler barrier: the rows are written before DONE

@@ -28,6 +28,9 @@ ROWS = 500
 RTOL = 1e-12
 DEVICE = os.environ.get("TETHER_TEST_DEVICE", "cpu")
 """Where the torch step runs: CI has no GPU; a device session sets "cuda"."""
+BACKEND = os.environ.get("TETHER_TEST_BACKEND", "torch")
+"""TorchTetherVecEnv's backend: "numba-cuda" on a GPU, or in numba-cuda's simulator
+(test_accel_numba_cuda.py runs this file so)."""
 
 
 def _random_rows(config: EnvConfig, rng: np.random.Generator, rows: int) -> dict:
@@ -65,7 +68,8 @@ def _numba_step(config: EnvConfig, draw: dict):
 
 
 def _torch_step(config_kwargs: dict, draw: dict) -> TorchTetherVecEnv:
-    env = TorchTetherVecEnv(ROWS, device=DEVICE, seed=0, **config_kwargs)
+    env = TorchTetherVecEnv(ROWS, device=DEVICE, seed=0, backend=BACKEND, **config_kwargs)
+    assert env.backend == BACKEND
     env.reset()
     def as_t(x):
         return (torch.as_tensor(x, dtype=torch.float64, device=env.device))

@@ -65,3 +65,15 @@ def test_cuda_without_a_gpu_is_a_clear_error(tmp_path, capsys):
         pytest.skip("this machine has a GPU")
     code = train_main(["gpu", "--device", "cuda", "--out", str(tmp_path / "o")])
     assert code == 2 and "pip install" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--backend", "numba"], "backend='numba' must be one of"),
+    (["--backend", "numba-cuda", "--compile"], "compile=True must be False"),
+    (["--backend", "numba-cuda"], "needs a CUDA device, got device='cpu'"),
+])
+def test_bad_backend_is_one_line_before_any_work(tmp_path, capsys, extra, message):
+    code = train_main(["gpu", "--device", "cpu", "--out", str(tmp_path / "o"), *extra])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()

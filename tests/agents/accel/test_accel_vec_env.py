@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -13,6 +15,9 @@ from tether_gym.envs.layout import OBSERVATION  # noqa: E402
 from tether_gym_agents.accel.vec_env import TorchTetherVecEnv  # noqa: E402
 
 B = 48
+DEVICE = os.environ.get("TETHER_TEST_DEVICE", "cpu")
+BACKEND = os.environ.get("TETHER_TEST_BACKEND", "torch")
+"""Where and by which backend the torch env steps (test_accel_chain.py says how they are set)."""
 TRAINING = {"increment_gain": 0.5, "initial_theta": [0.0, 0.0], "init_theta_range": 0.15,
             "init_dtheta_range": 0.1, "eccentricity_range": [0.0, 0.35], "mass_range": 0.25,
             "observe_params": False}
@@ -29,11 +34,11 @@ def _copy_rows(venv, env):
     """The native env's rows (state, parameters, command, noise, outputs) into the torch env."""
     r = venv.unwrapped._batch.rows
     def t(x):
-        return (torch.as_tensor(np.array(x), dtype=torch.float64))
+        return (torch.as_tensor(np.array(x), dtype=torch.float64, device=env.device))
     env.nu, env.y, env.par, env.u, env.noise = t(r.nu), t(r.y), t(r.par), t(r.command), t(r.noise)
     env.nu_end, env.tension, env.tension_min = t(r.nu_end), t(r.tension), t(r.tension_min)
     env.derivative = t(r.derivative)
-    env.obs = torch.as_tensor(r.obs.copy())
+    env.obs = torch.as_tensor(r.obs.copy(), device=env.device)
 
 
 @pytest.mark.parametrize("n_bodies", [3, 5])
@@ -41,7 +46,8 @@ def test_whole_episodes_equal_numba(n_bodies):
     """754-step episodes from the same starts, driven by the same actions: 1e-9, same ends."""
     kwargs = {**TRAINING, "n_bodies": n_bodies, "initial_theta": [0.0] * (n_bodies - 1)}
     venv, obs = _native(kwargs)
-    env = TorchTetherVecEnv(B, device="cpu", seed=0, **kwargs)
+    env = TorchTetherVecEnv(B, device=DEVICE, seed=0, backend=BACKEND, **kwargs)
+    assert env.backend == BACKEND
     env.reset()
     _copy_rows(venv, env)
     n = n_bodies - 1
@@ -55,10 +61,12 @@ def test_whole_episodes_equal_numba(n_bodies):
         err = obs[:, OBSERVATION.slices(n)["error"]]
         action = amplitude * np.sin(0.05 * step + 10.0 * err)
         obs, rew, term, trunc, info = venv.step(action)
-        tobs, trew, tterm, ttrunc, tinfo = env.step(torch.as_tensor(action))
+        tobs, trew, tterm, ttrunc, tinfo = (x.cpu() if hasattr(x, "cpu") else
+                                            {k: v.cpu() for k, v in x.items()}
+                                            for x in env.step(torch.as_tensor(action)))
         y = venv.unwrapped._batch.rows.y
         live = alive.copy()
-        dev = np.abs(env.y.numpy()[live] - y[live]) / np.maximum(np.abs(y[live]), 1e-3)
+        dev = np.abs(env.y.cpu().numpy()[live] - y[live]) / np.maximum(np.abs(y[live]), 1e-3)
         max_dev = max(max_dev, float(dev.max(initial=0.0)))
         np.testing.assert_allclose(trew.numpy()[live], rew[live], rtol=1e-9, atol=1e-12)
         np.testing.assert_array_equal(tterm.numpy()[live], term[live])
@@ -79,7 +87,7 @@ def test_start_from_the_same_draws_equals_numba():
     """The reset of a row from numpy's draws (same order) is the native env's reset."""
     kwargs = {**TRAINING, "obs_noise": 1e-3}
     venv, obs = _native(kwargs, seed=11)
-    env = TorchTetherVecEnv(B, device="cpu", seed=0, **kwargs)
+    env = TorchTetherVecEnv(B, device=DEVICE, seed=0, backend=BACKEND, **kwargs)
     n = 2
     draws = {"ecc": [], "scale": [], "unit": [], "gauss": []}
     for i in range(B):  # the vector env seeds sub-env i with seed + i
@@ -88,8 +96,9 @@ def test_start_from_the_same_draws_equals_numba():
         draws["scale"].append(rng.uniform(0.75, 1.25, n))
         draws["unit"].append(rng.uniform(-1.0, 1.0, 3 * n))
         draws["gauss"].append(rng.standard_normal(4 * n))
-    s = env.start({k: torch.as_tensor(np.array(v), dtype=torch.float64)
+    s = env.start({k: torch.as_tensor(np.array(v), dtype=torch.float64, device=env.device)
                    for k, v in draws.items()})
+    s = {k: v.cpu() for k, v in s.items()}
     r = venv.unwrapped._batch.rows
     assert s["ok"].all()
     for key, want in (("y", r.y), ("par", r.par), ("noise", r.noise), ("u", r.command),
@@ -101,9 +110,10 @@ def test_start_from_the_same_draws_equals_numba():
 def test_autoreset_next_step_and_same_step():
     kwargs = {**TRAINING}
     for mode in ("next_step", "same_step"):
-        env = TorchTetherVecEnv(8, device="cpu", seed=5, autoreset_mode=mode, **kwargs)
+        env = TorchTetherVecEnv(8, device=DEVICE, seed=5, autoreset_mode=mode, backend=BACKEND,
+                                **kwargs)
         env.reset()
-        wild = torch.ones((8, 2), dtype=torch.float64)  # reel out flat out: ends early
+        wild = torch.ones((8, 2), dtype=torch.float64, device=env.device)  # ends early
         for _ in range(2000):
             obs, rew, term, trunc, info = env.step(wild)
             if term.any():

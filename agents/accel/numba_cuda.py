@@ -1,0 +1,200 @@
+"""The numba env's own row step, compiled for a CUDA GPU by numba-cuda: one chain per thread.
+
+:class:`NumbaCudaStep` is a drop-in for :func:`~.chain.control_step` in
+:class:`~.vec_env.TorchTetherVecEnv` (``backend="numba-cuda"``). Its kernel calls
+:func:`tether_gym.envs.step_kernel.step_row`, the very function every step of the numba
+env runs (physics, reward, failure code, cost, observation), compiled by numba-cuda for
+the GPU instead of by numba for the CPU: the equations have one source. The torch port
+(:mod:`.chain`) stays the default backend and the only one that runs on a CPU.
+
+The arrays are torch tensors on the GPU, handed to the kernel without a copy through
+``__cuda_array_interface__``; the kernel runs on the default stream, as torch's work
+does. Each call copies the inputs (nu, y, command, disturbance, noise, parameters) into
+the batch's rows, launches one kernel over the rows and returns the rows as a
+:class:`~.chain.TaskStep` (views, overwritten by the next call).
+
+On a machine without a GPU the same kernel runs in numba-cuda's simulator
+(``NUMBA_ENABLE_CUDASIM=1`` before numba is imported, CPU tensors): the simulator runs
+the kernel's Python, row by row, and calls the CPU-compiled ``step_row``, so it tests
+this module's wiring (which row reads and writes what), not the GPU's arithmetic.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+import numpy as np
+import torch
+
+if not hasattr(np, "row_stack"):
+    # numpy 2.5 removed np.row_stack (an alias of vstack); numba-cuda 0.30 still declares
+    # an overload of it when its CUDA target loads, and fails without it (seen on the GPU
+    # machine's numpy 2.5.2)
+    setattr(np, "row_stack", np.vstack)  # noqa: B010 - an attribute numpy no longer has
+
+from numba import cuda  # noqa: E402 - numba-cuda's target where installed (load_cuda checks)
+
+from tether_gym.envs.batch import step_config, zero_rows
+from tether_gym.envs.config import EnvConfig
+from tether_gym.envs.step_kernel import Rows, RowWork, new_row_work, step_row
+from tether_gym.physics.kernels import Scratch
+
+from .chain import TaskStep
+
+__all__ = ["NumbaCudaStep", "NUMBA_CUDA_HINT", "simulated", "load_cuda", "kernel_arrays",
+           "step_kernel", "check_device"]
+
+NUMBA_CUDA_HINT = ('backend="numba-cuda" needs numba-cuda and the CUDA toolkit libraries: '
+                   'pip install "numba-cuda[cu13]" (or pip install -e ".[gpu]")')
+
+THREADS_PER_BLOCK = 128
+"""Threads (rows) per block of the step kernel."""
+
+_KERNEL = None
+
+
+def simulated() -> bool:
+    """Whether numba-cuda runs in its CPU simulator (``NUMBA_ENABLE_CUDASIM=1``)."""
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0") == "1"
+
+
+def load_cuda():
+    """``numba.cuda``: numba-cuda's (NVIDIA's target), or its simulator; else an ImportError.
+
+    numba still ships an older built-in CUDA target, which is not used for the GPU.
+    """
+    if not simulated() and getattr(cuda, "implementation", "") != "NVIDIA":
+        raise ImportError(NUMBA_CUDA_HINT)
+    return cuda
+
+
+def check_device(device: torch.device) -> None:
+    """A ValueError unless ``device`` is a CUDA device (or numba-cuda's simulator runs).
+
+    Then :func:`load_cuda`'s ImportError where numba-cuda is missing.
+    """
+    if device.type != "cuda" and not simulated():
+        raise ValueError(f'backend="numba-cuda" needs a CUDA device, got device='
+                         f'{str(device)!r} (on a CPU use backend="torch"; tests run the '
+                         "kernel in numba-cuda's simulator, NUMBA_ENABLE_CUDASIM=1)")
+    load_cuda()
+
+
+def step_kernel(action, rows, cfg, work, reset):
+    """Row b = the thread's grid index: :func:`step_row` with its own slice of ``work``.
+
+    ``action`` is a 1-tuple holding the (B, n) actions (inside a tuple, as every other
+    array here, so that the simulator hands it to the CPU-compiled ``step_row`` as is).
+    """
+    b = cuda.grid(1)
+    if b < rows.y.shape[0]:
+        p = work.physics
+        mine = RowWork(Scratch(p.S[b], p.R[b], p.V[b], p.tension[b], p.k1[b], p.k2[b],
+                               p.k3[b], p.k4[b], p.tmp[b], p.orbit[b]),
+                       work.command[b], work.zero[b], work.accel[b], work.previous[b],
+                       work.terms[b])
+        step_row(b, action[0], rows, cfg, mine, reset)
+
+
+def kernel_arrays(config: EnvConfig, num: int, zeros) -> tuple[Any, Any, Any]:
+    """The kernel's arrays for ``num`` rows: rows, per-thread scratch and actions.
+
+    ``zeros(shape, dtype)`` allocates one (torch on the device here; numpy in
+    ``bench/numba_cuda_ptx.py``, which compiles the kernel without a GPU). The scratch
+    is :func:`~tether_gym.envs.step_kernel.new_row_work`'s with a leading row axis;
+    ``nu_end`` is +inf (truncation is the env's business, not the kernel's) and the
+    cached sin/cos of the anomaly NaN (none cached yet). Returns (:class:`Rows`,
+    :class:`RowWork`, actions (num, n)) of whatever arrays ``zeros`` makes.
+    """
+    rows = zero_rows(config, num, zeros)
+    rows.nu_end[:] = np.inf
+    template = new_row_work(config.n_tethers)
+    work = RowWork(Scratch(*[zeros((num,) + a.shape, a.dtype) for a in template.physics]),
+                   *[zeros((num,) + a.shape, a.dtype) for a in template[1:]])
+    work.physics.orbit[:] = np.nan
+    return rows, work, zeros((num, config.n_tethers), np.dtype(np.float64))
+
+
+def _kernel():
+    """:func:`step_kernel` for the device (compiled at its first launch, cached on disk)."""
+    global _KERNEL
+    if _KERNEL is None:
+        _KERNEL = load_cuda().jit(cache=not simulated())(step_kernel)
+    return _KERNEL
+
+
+class NumbaCudaStep:
+    """One control step of ``num`` rows by the numba kernel compiled for the GPU.
+
+    Parameters
+    ----------
+    config : EnvConfig
+        The env's configuration (its :func:`~tether_gym.envs.batch.step_config`).
+    num : int
+        Rows.
+    device : torch.device
+        A CUDA device, or the CPU under numba-cuda's simulator (tests).
+
+    Calling it as ``step(nu, y, u, action, disturbance, noise, par)`` (float64 tensors
+    on ``device``: (B,), (B, 4n), (B, n), (B, n), (B, n), (B, 4n), (B, P)) does what
+    :func:`~.chain.control_step` does and returns a :class:`~.chain.TaskStep`.
+    """
+
+    def __init__(self, config: EnvConfig, num: int, device: torch.device):
+        check_device(device)
+        self._cuda = load_cuda()
+        self.device = device
+        self.num = int(num)
+
+        def zeros(shape, dtype):
+            return torch.zeros(shape, dtype=_TORCH_DTYPES[np.dtype(dtype)], device=device)
+
+        self.rows, self.work, self.action = kernel_arrays(config, self.num, zeros)
+        cfg = step_config(config)
+        self._cfg = cfg._replace(length_nominal=self._view(
+            torch.as_tensor(cfg.length_nominal, dtype=torch.float64, device=device)))
+        self._rows = Rows(*[self._view(t) for t in self.rows])
+        self._work = RowWork(Scratch(*[self._view(t) for t in self.work.physics]),
+                             *[self._view(t) for t in self.work[1:]])
+        self._action = (self._view(self.action),)
+        self._blocks = (self.num + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+
+    def _view(self, t: torch.Tensor):
+        """The kernel's view of a tensor: numba's device array, or numpy's in the simulator."""
+        if t.device.type == "cuda":
+            return self._cuda.as_cuda_array(t)
+        return t.numpy()
+
+    def _launch(self, reset: bool) -> None:
+        _kernel()[self._blocks, THREADS_PER_BLOCK](self._action, self._rows, self._cfg,
+                                                    self._work, reset)
+
+    def __call__(self, nu, y, u, action, disturbance, noise, par) -> TaskStep:
+        """One step of every row (the class docstring says what goes in and out)."""
+        r = self.rows
+        for dst, src in ((r.nu, nu), (r.y, y), (r.command, u), (self.action, action),
+                         (r.disturbance, disturbance), (r.noise, noise), (r.par, par)):
+            dst.copy_(src)
+        self._launch(False)
+        return TaskStep(r.nu, r.y, r.command, r.tension, r.tension_min, r.derivative, r.reward,
+                        r.components, r.cost, r.failure, r.obs)
+
+    def evaluate(self, nu, y, noise, par) -> dict[str, torch.Tensor]:
+        """The reset's evaluation of every row (``step_row`` with ``reset``), as copies.
+
+        At (nu, y) with the reels holding their rate and no disturbance: the command
+        ``u`` = clip(l' / max_reel_rate, -1, 1), ``tension`` and ``tension_min`` (T^),
+        ``derivative`` (dy/dnu) and the observation ``obs`` (with ``noise``).
+        """
+        r = self.rows
+        for dst, src in ((r.nu, nu), (r.y, y), (r.noise, noise), (r.par, par)):
+            dst.copy_(src)
+        self._launch(True)
+        return {"u": r.command.clone(), "tension": r.tension.clone(),
+                "tension_min": r.tension_min.clone(), "derivative": r.derivative.clone(),
+                "obs": r.obs.clone()}
+
+
+_TORCH_DTYPES = {np.dtype(np.float64): torch.float64, np.dtype(np.float32): torch.float32,
+                 np.dtype(np.int64): torch.int64, np.dtype(np.bool_): torch.bool}

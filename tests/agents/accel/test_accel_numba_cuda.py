@@ -1,0 +1,61 @@
+"""The numba-cuda backend: the equality tests run through its kernel, and its refusals.
+
+CI has no GPU, so the kernel runs in numba-cuda's simulator (``NUMBA_ENABLE_CUDASIM=1``,
+which must be set before numba is imported: a subprocess). The simulator runs the kernel's
+Python row by row over the CPU-compiled ``step_row``: these tests check the wiring (each
+thread's row and scratch, the arrays handed to the kernel, the reset's evaluation), and a
+device session runs the same files with ``TETHER_TEST_DEVICE=cuda`` for the GPU's arithmetic.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("torch")
+
+import torch  # noqa: E402
+
+from tether_gym_agents.accel import numba_cuda  # noqa: E402
+from tether_gym_agents.accel.vec_env import BACKENDS, TorchTetherVecEnv  # noqa: E402
+
+HERE = Path(__file__).parent
+
+
+@pytest.mark.slow
+def test_equality_tests_pass_through_the_kernel():
+    """test_accel_chain (one step, 1e-12) and the episode/start/autoreset tests, simulated."""
+    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "TETHER_TEST_BACKEND": "numba-cuda",
+           "TETHER_TEST_DEVICE": "cpu", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
+    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+           str(HERE / "test_accel_chain.py"), str(HERE / "test_accel_vec_env.py"),
+           "-k", "equal_numba or equals_numba or autoreset"]
+    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+    tail = (done.stdout + done.stderr)[-3000:]
+    assert done.returncode == 0, tail
+    assert " passed" in tail and "skipped" not in tail and "deselected" in tail, tail
+
+
+def test_backend_refusals():
+    assert BACKENDS == ("torch", "numba-cuda")
+    with pytest.raises(ValueError, match="backend='numba' must be one of"):
+        TorchTetherVecEnv(2, backend="numba")
+    with pytest.raises(ValueError, match="compile=True must be False"):
+        TorchTetherVecEnv(2, backend="numba-cuda", compile=True)
+    with pytest.raises(ValueError, match="dtype=torch.float32"):
+        TorchTetherVecEnv(2, backend="numba-cuda", dtype=torch.float32)
+    if not numba_cuda.simulated():
+        with pytest.raises(ValueError, match="needs a CUDA device, got device='cpu'"):
+            TorchTetherVecEnv(2, backend="numba-cuda", device="cpu")
+
+
+def test_load_cuda_names_the_install_without_numba_cuda(monkeypatch):
+    """numba's own deprecated CUDA target is not taken for numba-cuda's."""
+    monkeypatch.setattr(numba_cuda.cuda, "implementation", "Built-in", raising=False)
+    monkeypatch.setattr(numba_cuda, "simulated", lambda: False)
+    with pytest.raises(ImportError, match=r'pip install "numba-cuda\[cu13\]"'):
+        numba_cuda.load_cuda()
