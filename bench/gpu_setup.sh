@@ -6,7 +6,9 @@
 #   python3 -m pip download --no-deps --only-binary=:all: --python-version 3.12 \
 #     --implementation cp --platform manylinux_2_28_x86_64 --platform manylinux_2_24_x86_64 \
 #     --platform manylinux2014_x86_64 -d .whl gymnasium==1.4.0 farama-notifications==0.0.6 \
-#     stable-baselines3==2.9.2 numba-cuda==0.30.4
+#     stable-baselines3==2.9.2 numba-cuda==0.30.4 rsl-rl-lib==5.5.1 tensordict==0.15.3 \
+#     pyvers==0.2.3 GitPython==3.2.1 gitdb==4.0.12 smmap==5.0.3
+# (the last six for experiments/issue34/learners.py's rsl_rl runs)
 set -u
 export PYTHONUNBUFFERED=1 OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \

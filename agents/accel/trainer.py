@@ -255,11 +255,25 @@ def evaluate_on_device(policy, obs_stats, settings, env_kwargs, device, episodes
                        seed: int) -> dict[str, list[float]]:
     """Each seed's deterministic policy over ``episodes`` whole episodes, on the device.
 
-    The training distribution (``env_kwargs``), not a benchmark suite: a check of the
-    run itself. Returns per seed the mean episode return, the fraction of episodes
-    that survive and the RMS of theta - theta_d over the survivors' steps after orbit 1.
+    :func:`deterministic_episodes` with the seeds' normalised mean actions.
     """
-    S = len(policy.seeds)
+    def act(raw: torch.Tensor) -> torch.Tensor:
+        return policy.mean_action(_normalize(raw, obs_stats, settings))
+
+    return deterministic_episodes(act, len(policy.seeds), env_kwargs, device, episodes, seed)
+
+
+def deterministic_episodes(act, groups: int, env_kwargs, device, episodes: int,
+                           seed: int) -> dict[str, list[float]]:
+    """``groups`` policies over ``episodes`` whole episodes each, on the device.
+
+    ``act(raw_obs)`` maps the raw observations (groups, episodes, obs_dim) to actions
+    (groups, episodes, n), clipped to [-1, 1] here. The training distribution
+    (``env_kwargs``), not a benchmark suite: a check of a run itself. Returns per group
+    the mean episode return, the fraction of episodes that survive and the RMS of
+    theta - theta_d over the survivors' steps after orbit 1.
+    """
+    S = groups
     env = TorchTetherVecEnv(S * episodes, device=device, seed=seed, check_actions=False,
                             **env_kwargs)
     d, a = env.observation_dim, env.n
@@ -272,9 +286,8 @@ def evaluate_on_device(policy, obs_stats, settings, env_kwargs, device, episodes
     per_orbit = env.config.max_episode_steps / env.config.orbits_per_episode
     with torch.no_grad():
         for t in range(env.config.max_episode_steps):
-            obs = _normalize(raw.view(S, episodes, d), obs_stats, settings)
-            act = torch.clamp(policy.mean_action(obs), -1.0, 1.0).to(torch.float64)
-            raw, rew, term, trunc, info = env.step(act.view(S * episodes, a))
+            action = torch.clamp(act(raw.view(S, episodes, d)), -1.0, 1.0).to(torch.float64)
+            raw, rew, term, trunc, info = env.step(action.reshape(S * episodes, a))
             rew, term, trunc = (x.view(S, episodes) for x in (rew, term, trunc))
             ret += torch.where(alive, rew, torch.zeros_like(rew))
             if t >= per_orbit:

@@ -77,3 +77,17 @@ def test_bad_backend_is_one_line_before_any_work(tmp_path, capsys, extra, messag
     err = capsys.readouterr().err
     assert code == 2 and message in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_the_device_scripts_configs_load():
+    """The configs bench/gpu_session*.sh train with are valid for today's env id."""
+    from pathlib import Path
+
+    from tether_gym_agents.accel.cli import read_config
+
+    root = Path(__file__).resolve().parents[3]
+    files = sorted((root / "experiments" / "issue34" / "cfg").glob("*.yml"))
+    assert len(files) >= 4
+    for f in files:
+        settings, steps, env_kwargs, checkpoints = read_config(f)
+        assert steps >= settings.n_envs * settings.n_steps and env_kwargs
