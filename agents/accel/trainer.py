@@ -47,6 +47,20 @@ def _normalize(obs: torch.Tensor, stats: RunningStats, s: PPOSettings) -> torch.
     return torch.clamp(x, -s.clip_obs, s.clip_obs).to(torch.float32)
 
 
+def scale_rewards(rew, done, returns, stats: RunningStats, s: PPOSettings):
+    """VecNormalize's reward scaling, per seed: (scaled rewards, updated returns).
+
+    rew, done, returns (S, N): the running discounted return takes the step's reward,
+    its statistics ``stats`` (S, 1) are updated, the reward is divided by the return's
+    standard deviation and clipped to +-``clip_reward``, and ended rows' returns restart.
+    """
+    returns = returns * s.gamma + rew
+    stats.update(returns[..., None])
+    scale = torch.sqrt(stats.var[:, :1] + s.norm_epsilon)
+    scaled = torch.clamp(rew / scale, -s.clip_reward, s.clip_reward)
+    return scaled, torch.where(done, torch.zeros_like(returns), returns)
+
+
 def _sb3_policy(policy: MultiSeedPolicy, s: int, env: TorchTetherVecEnv, settings: PPOSettings):
     """Seed s's weights in a stable-baselines3 ``ActorCriticPolicy`` (for save_agent)."""
     from stable_baselines3.common.policies import ActorCriticPolicy
@@ -172,12 +186,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                 obs_raw = raw.view(S, N, d)
                 obs_stats.update(obs_raw)
                 obs = _normalize(obs_raw, obs_stats, settings)
-                # VecNormalize's reward scaling by the running discounted return's std
-                returns = returns * settings.gamma + rew
-                ret_stats.update(returns[..., None])
-                scale = torch.sqrt(ret_stats.var[:, :1] + settings.norm_epsilon)
-                scaled = torch.clamp(rew / scale, -settings.clip_reward, settings.clip_reward)
-                returns = torch.where(done, torch.zeros_like(returns), returns)
+                scaled, returns = scale_rewards(rew, done, returns, ret_stats, settings)
                 # bootstrap the value of a truncated episode's last observation (SB3's PPO)
                 last_obs = _normalize(info["final_obs"].view(S, N, d), obs_stats, settings)
                 boot = settings.gamma * policy.value(last_obs)

@@ -13,9 +13,11 @@ the deterministic policy on 64 episodes of the training distribution with the sa
 function for both (``tether_gym_agents.accel.trainer.deterministic_episodes``), and writes
 the wall times and scores as JSON. Each learner runs in its own idiom where they differ:
 the home-made learner normalises rewards as VecNormalize does (rsl_rl has no reward
-normalisation) and bootstraps truncated episodes from their last observation (rsl_rl
-from the value of the observation before the step); rsl_rl normalises observations with
-its EmpiricalNormalization. Both clip actions to [-1, 1] before the env, as SB3 does.
+normalisation; ``--learner rsl_rl_rewnorm`` gives it the home-made learner's reward
+scaling, to test whether that is the difference) and bootstraps truncated episodes from
+their last observation (rsl_rl from the value of the observation before the step);
+rsl_rl normalises observations with its EmpiricalNormalization. Both clip actions to
+[-1, 1] before the env, as SB3 does.
 ``experiments/issue34/learners.md`` holds the table of a run of this script.
 """
 
@@ -35,11 +37,17 @@ HERE = Path(__file__).resolve().parent
 CONFIG = HERE / "cfg" / "cpu_learners.yml"
 
 
-def rsl_env(num: int, seed: int, env_kwargs: dict, device):
-    """TorchTetherVecEnv as an rsl_rl ``VecEnv`` (same-step autoreset, ``time_outs``)."""
+def rsl_env(num: int, seed: int, env_kwargs: dict, device, reward_norm=None):
+    """TorchTetherVecEnv as an rsl_rl ``VecEnv`` (same-step autoreset, ``time_outs``).
+
+    ``reward_norm``: PPOSettings whose VecNormalize reward scaling (the home-made
+    learner's, ``trainer.scale_rewards``) the env applies to its rewards; None: raw.
+    """
     from rsl_rl.env import VecEnv
     from tensordict import TensorDict
 
+    from tether_gym_agents.accel.ppo import RunningStats
+    from tether_gym_agents.accel.trainer import scale_rewards
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
     class TetherRslEnv(VecEnv):
@@ -51,6 +59,8 @@ def rsl_env(num: int, seed: int, env_kwargs: dict, device):
             self.episode_length_buf = torch.zeros(num, dtype=torch.long, device=self.device)
             self.cfg = {"env_kwargs": env_kwargs}
             self._obs, _ = self.env.reset()
+            self._returns = torch.zeros((1, num), dtype=torch.float64, device=self.device)
+            self._stats = RunningStats(1, 1, self.device)
 
         def get_observations(self):
             return TensorDict({"policy": self._obs.float()}, batch_size=[self.num_envs])
@@ -59,6 +69,10 @@ def rsl_env(num: int, seed: int, env_kwargs: dict, device):
             a = torch.clamp(actions, -1.0, 1.0).to(torch.float64)
             self._obs, rew, term, trunc, _ = self.env.step(a)
             done = term | trunc
+            if reward_norm is not None:
+                rew, self._returns = scale_rewards(rew[None], done[None], self._returns,
+                                                   self._stats, reward_norm)
+                rew = rew[0]
             self.episode_length_buf = torch.where(done, 0, self.episode_length_buf + 1)
             return (self.get_observations(), rew.float(), done.long(),
                     {"time_outs": (trunc & ~term).float()})
@@ -88,7 +102,8 @@ def rsl_config(s) -> dict:
     }
 
 
-def train_rsl(settings, steps: int, env_kwargs: dict, seed: int, device) -> dict:
+def train_rsl(settings, steps: int, env_kwargs: dict, seed: int, device,
+              reward_norm: bool = False) -> dict:
     from rsl_rl.runners import OnPolicyRunner
     from tensordict import TensorDict
 
@@ -96,7 +111,8 @@ def train_rsl(settings, steps: int, env_kwargs: dict, seed: int, device) -> dict
 
     t0 = time.perf_counter()
     torch.manual_seed(seed)
-    env = rsl_env(settings.n_envs, seed * 7919 + 1, env_kwargs, device)
+    env = rsl_env(settings.n_envs, seed * 7919 + 1, env_kwargs, device,
+                  settings if reward_norm else None)
     runner = OnPolicyRunner(env, rsl_config(settings), log_dir=None, device=str(env.device))
     per_it = settings.n_envs * settings.n_steps
     iterations = max(1, steps // per_it)
@@ -134,7 +150,8 @@ def train_home(settings, steps: int, env_kwargs: dict, seed: int, device) -> dic
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--learner", choices=["home", "rsl_rl"], required=True)
+    p.add_argument("--learner", choices=["home", "rsl_rl", "rsl_rl_rewnorm"], required=True,
+                   help="rsl_rl_rewnorm: rsl_rl on rewards scaled as the home-made learner's")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cpu")
     p.add_argument("--config", type=Path, default=CONFIG)
@@ -148,9 +165,12 @@ def main(argv=None) -> int:
     settings, steps, env_kwargs, _ = read_config(args.config)
     steps = steps if args.timesteps is None else args.timesteps
     device = resolve_device(args.device)
-    train = train_home if args.learner == "home" else train_rsl
     t0 = time.perf_counter()
-    result = train(settings, steps, env_kwargs, args.seed, device)
+    if args.learner == "home":
+        result = train_home(settings, steps, env_kwargs, args.seed, device)
+    else:
+        result = train_rsl(settings, steps, env_kwargs, args.seed, device,
+                           reward_norm=args.learner == "rsl_rl_rewnorm")
     result.update(learner=args.learner, seed=args.seed, device=str(device),
                   whole_s=time.perf_counter() - t0, config=str(args.config.name),
                   torch=torch.__version__)

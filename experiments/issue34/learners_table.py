@@ -29,7 +29,8 @@ def main(argv=None) -> int:
     print("# Issue 34: the home-made PPO of `train.py gpu` against rsl_rl's PPO\n")
     print("`experiments/issue34/learners.sh` (five seeds of each learner, `learners.py`, "
           "hyperparameters `cfg/cpu_learners.yml`) on the CPU of the 2-core development "
-          "machine, the two learners' seed k side by side, one thread each. Each policy is "
+          "machine, two runs at a time, one thread each. `rsl_rl_rewnorm` is rsl_rl trained "
+          "on rewards scaled as the home-made learner's (VecNormalize's formula). Each policy is "
           "scored deterministically on 64 episodes of the training distribution (the "
           "same function for both). This table is written by `learners_table.py`.\n")
     print("| learner | seeds | env steps per seed | training wall time [s] | survived (raw) "
