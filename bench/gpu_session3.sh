@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The next device session of issue 34 (prepared; about 8 minutes; no device was lent to the
+# The next device session of issue 34 (prepared; about 9 minutes; no device was lent to the
 # session that wrote it): the numba-cuda backend (the numba env's own step compiled for
 # the GPU) against the torch port, on the GPU.
 #   1. numba-cuda compiles the step for the device (bench/numba_cuda_ptx.py);
@@ -7,16 +7,24 @@
 #      at 1e-9, starts, autoreset), failures with their size;
 #   3. env throughput at 65,536 and 1,048,576 envs: torch eager, numba-cuda, and the
 #      torch.compile'd core (bench/gpu_throughput.py);
-#   4. one seed of candidate B with the numba-cuda backend, 50 s of training; the run
-#      folder comes back in $OUT/runs3.tar.gz for `python evaluate.py` here;
-#   5. the learner comparison of experiments/issue34/learners.py at B's GPU batch sizes:
-#      one seed of the home-made PPO and one of rsl_rl's, 3M env steps each, scored alike.
-# Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it):
-#   bash bench/gpu_session3.sh
+#   4. one seed of candidate D (cfg/D.yml: GPU-sized rollouts, SB3-sized minibatches; it
+#      learned on the CPU where B did not, experiments/issue34/README.md) on the
+#      numba-cuda backend, 50 s of training;
+#   5. ten seeds of D in one process, 150 s, on the numba-cuda backend if step 4 wrote
+#      its run, else on the torch backend: the candidate for the shipped row.
+#   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
+#   learner comparison (experiments/issue34/learners.py --device cuda --config
+#   experiments/issue34/cfg/D.yml) is left for a session with time to spare.
+# Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
+# as two calls, each under the tool's 10 minutes even at every timeout:
+#   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
+#   bash bench/gpu_session3.sh train       # steps 4-5 (at most 280 s; about 4 minutes)
 . bench/gpu_setup.sh
+PART=${1:-check}
 {
+if [ "$PART" = check ]; then
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
-python3 -c "import torch, numba, numpy; from importlib.metadata import version as v; print('torch', torch.__version__, 'numba', numba.__version__, 'numpy', numpy.__version__, 'numba-cuda', v('numba-cuda'))"
+nproc; python3 -c "import torch, numba, numpy; from importlib.metadata import version as v; print('torch', torch.__version__, 'numba', numba.__version__, 'numpy', numpy.__version__, 'numba-cuda', v('numba-cuda'))"
 echo "== 1. numba-cuda compiles the step"
 timeout 60 python3 bench/numba_cuda_ptx.py
 for backend in torch numba-cuda; do
@@ -29,16 +37,20 @@ done
 echo "== 3. throughput"
 timeout 200 python3 bench/gpu_throughput.py --device cuda --envs 65536 1048576 --steps 20 \
     --backend torch numba-cuda --compile --out $OUT/bench3.json
-echo "== 4. one seed of B, numba-cuda backend"
+fi
+if [ "$PART" = train ]; then
+echo "== 4. one seed of D, numba-cuda backend"
 t=$(date +%s.%N)
-timeout 90 python3 train.py gpu --config experiments/issue34/cfg/B.yml --seeds 1 \
-    --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_B_numba_cuda
+timeout 90 python3 train.py gpu --config experiments/issue34/cfg/D.yml --seeds 1 \
+    --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_D_numba_cuda
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
-echo "== 5. home-made PPO against rsl_rl's, B's batch sizes"
-for learner in home rsl_rl; do
-  timeout 75 python3 experiments/issue34/learners.py --learner $learner --device cuda \
-      --config experiments/issue34/cfg/B.yml --timesteps 3000000 --out $OUT/learner_$learner.json \
-      | tail -n 1
-done
-} 2>&1 | tee $OUT/log3.txt
+backend=torch
+[ -f runs_gpu/single_D_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
+echo "== 5. ten seeds of D, backend $backend"
+t=$(date +%s.%N)
+timeout 190 python3 train.py gpu --config experiments/issue34/cfg/D.yml --seeds 10 \
+    --backend $backend --max-seconds 150 --device cuda --out runs_gpu/ten_D
+echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3.tar.gz runs_gpu
+fi
+} 2>&1 | tee $OUT/log3_$PART.txt
