@@ -69,16 +69,16 @@ def load_cuda():
     return cuda
 
 
-def check_device(device: torch.device) -> None:
-    """A ValueError unless ``device`` is a CUDA device (or numba-cuda's simulator runs).
+def check_device(device: torch.device):
+    """``numba.cuda`` for ``device`` (:func:`load_cuda`, an ImportError without numba-cuda).
 
-    Then :func:`load_cuda`'s ImportError where numba-cuda is missing.
+    A ValueError first unless ``device`` is a CUDA device (or numba-cuda's simulator runs).
     """
     if device.type != "cuda" and not simulated():
         raise ValueError(f'backend="numba-cuda" needs a CUDA device, got device='
                          f'{str(device)!r} (on a CPU use backend="torch"; tests run the '
                          "kernel in numba-cuda's simulator, NUMBA_ENABLE_CUDASIM=1)")
-    load_cuda()
+    return load_cuda()
 
 
 def step_kernel(action, rows, cfg, work, reset):
@@ -142,8 +142,7 @@ class NumbaCudaStep:
     """
 
     def __init__(self, config: EnvConfig, num: int, device: torch.device):
-        check_device(device)
-        self._cuda = load_cuda()
+        self._cuda = check_device(device)
         self.device = device
         self.num = int(num)
 
