@@ -3,12 +3,13 @@
     python bench/gpu_throughput.py --device cuda --envs 4096 65536 262144 1048576 --out F.json
     python bench/gpu_throughput.py --device cuda --envs 65536 1048576 --backend torch numba-cuda
     python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba      # the CPU ratio
+    python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba --backend torch numba
 
 For each batch size: env steps per second of ``TorchTetherVecEnv.step`` (N = 3,
 float64, the ppo training distribution's env kwargs, zero actions, autoreset on), after
 warm-up steps, timed over whole steps with the device synchronised. ``--numba`` times
 the native vector env (``gym.make_vec``, one thread) at the same sizes in the same run;
-``--backend torch numba-cuda`` times both backends of the env (``reset_s``: construction
+``--backend torch numba numba-cuda`` times those backends of the env (``reset_s``: construction
 and first reset, which includes numba-cuda's compile of the step kernel on a cold cache);
 ``--numba-cuda`` probes whether numba-cuda compiles the existing numba kernel
 (``tether_gym.physics.kernels.advance_one``) into a CUDA kernel, and times it when it
@@ -184,8 +185,10 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="cpu")
     p.add_argument("--envs", type=int, nargs="+", default=[256, 4096])
     p.add_argument("--steps", type=int, default=20)
-    p.add_argument("--backend", nargs="+", default=["torch"], choices=["torch", "numba-cuda"],
-                   help="TorchTetherVecEnv backends to time (numba-cuda: CUDA devices only)")
+    p.add_argument("--backend", nargs="+", default=["torch"],
+                   choices=["torch", "numba", "numba-cuda"],
+                   help="TorchTetherVecEnv backends to time (numba: CPU only; numba-cuda: "
+                        "CUDA devices only)")
     p.add_argument("--numba", action="store_true")
     p.add_argument("--numba-cuda", action="store_true")
     p.add_argument("--compile", action="store_true", help="also time the torch.compile'd core")

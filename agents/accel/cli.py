@@ -133,8 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--compile", action="store_true",
                    help="fuse the env's step with torch.compile (compiles at the first step)")
     p.add_argument("--backend", default="torch",
-                   help="the env's step: torch (default: torch operations) or numba-cuda (the "
-                        "numba env's own row step compiled for the GPU; docs/gpu.md)")
+                   help="the env's step: torch (default: torch operations), numba (the numba "
+                        "env's own row step, CPU) or numba-cuda (that row step compiled for "
+                        "the GPU); docs/gpu.md")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")

@@ -5,13 +5,13 @@
 :func:`tether_gym.envs.step_kernel.step_row`, the very function every step of the numba
 env runs (physics, reward, failure code, cost, observation), compiled by numba-cuda for
 the GPU instead of by numba for the CPU: the equations have one source. The torch port
-(:mod:`.chain`) stays the default backend and the only one that runs on a CPU.
+(:mod:`.chain`) stays the default backend; on a CPU, ``backend="numba"``
+(:class:`~.row_step.NumbaCpuStep`) runs the same row code compiled by numba.
 
 The arrays are torch tensors on the GPU, handed to the kernel without a copy through
 ``__cuda_array_interface__``; the kernel runs on the default stream, as torch's work
-does. Each call copies the inputs (nu, y, command, disturbance, noise, parameters) into
-the batch's rows, launches one kernel over the rows and returns the rows as a
-:class:`~.chain.TaskStep` (views, overwritten by the next call).
+does. Each call (:class:`~.row_step.RowStep`) copies the inputs into the batch's rows,
+launches one kernel over the rows and returns the rows as a :class:`~.chain.TaskStep`.
 
 On a machine without a GPU the same kernel runs in numba-cuda's simulator
 (``NUMBA_ENABLE_CUDASIM=1`` before numba is imported, CPU tensors): the simulator runs
@@ -40,7 +40,7 @@ from tether_gym.envs.config import EnvConfig
 from tether_gym.envs.step_kernel import Rows, RowWork, new_row_work, step_row
 from tether_gym.physics.kernels import Scratch
 
-from .chain import TaskStep
+from .row_step import RowStep
 
 __all__ = ["NumbaCudaStep", "NUMBA_CUDA_HINT", "simulated", "load_cuda", "kernel_arrays",
            "step_kernel", "check_device"]
@@ -124,8 +124,8 @@ def _kernel():
     return _KERNEL
 
 
-class NumbaCudaStep:
-    """One control step of ``num`` rows by the numba kernel compiled for the GPU.
+class NumbaCudaStep(RowStep):
+    """:class:`~.row_step.RowStep` on a CUDA GPU: one kernel launch per step, one row per thread.
 
     Parameters
     ----------
@@ -135,21 +135,12 @@ class NumbaCudaStep:
         Rows.
     device : torch.device
         A CUDA device, or the CPU under numba-cuda's simulator (tests).
-
-    Calling it as ``step(nu, y, u, action, disturbance, noise, par)`` (float64 tensors
-    on ``device``: (B,), (B, 4n), (B, n), (B, n), (B, n), (B, 4n), (B, P)) does what
-    :func:`~.chain.control_step` does and returns a :class:`~.chain.TaskStep`.
     """
 
     def __init__(self, config: EnvConfig, num: int, device: torch.device):
         self._cuda = check_device(device)
-        self.device = device
-        self.num = int(num)
-
-        def zeros(shape, dtype):
-            return torch.zeros(shape, dtype=_TORCH_DTYPES[np.dtype(dtype)], device=device)
-
-        self.rows, self.work, self.action = kernel_arrays(config, self.num, zeros)
+        super().__init__(config, num, device)
+        self.rows, self.work, self.action = kernel_arrays(config, self.num, self.zeros)
         cfg = step_config(config)
         self._cfg = cfg._replace(length_nominal=self._view(
             torch.as_tensor(cfg.length_nominal, dtype=torch.float64, device=device)))
@@ -168,32 +159,3 @@ class NumbaCudaStep:
     def _launch(self, reset: bool) -> None:
         _kernel()[self._blocks, THREADS_PER_BLOCK](self._action, self._rows, self._cfg,
                                                     self._work, reset)
-
-    def __call__(self, nu, y, u, action, disturbance, noise, par) -> TaskStep:
-        """One step of every row (the class docstring says what goes in and out)."""
-        r = self.rows
-        for dst, src in ((r.nu, nu), (r.y, y), (r.command, u), (self.action, action),
-                         (r.disturbance, disturbance), (r.noise, noise), (r.par, par)):
-            dst.copy_(src)
-        self._launch(False)
-        return TaskStep(r.nu, r.y, r.command, r.tension, r.tension_min, r.derivative, r.reward,
-                        r.components, r.cost, r.failure, r.obs)
-
-    def evaluate(self, nu, y, noise, par) -> dict[str, torch.Tensor]:
-        """The reset's evaluation of every row (``step_row`` with ``reset``), as copies.
-
-        At (nu, y) with the reels holding their rate and no disturbance: the command
-        ``u`` = clip(l' / max_reel_rate, -1, 1), ``tension`` and ``tension_min`` (T^),
-        ``derivative`` (dy/dnu) and the observation ``obs`` (with ``noise``).
-        """
-        r = self.rows
-        for dst, src in ((r.nu, nu), (r.y, y), (r.noise, noise), (r.par, par)):
-            dst.copy_(src)
-        self._launch(True)
-        return {"u": r.command.clone(), "tension": r.tension.clone(),
-                "tension_min": r.tension_min.clone(), "derivative": r.derivative.clone(),
-                "obs": r.obs.clone()}
-
-
-_TORCH_DTYPES = {np.dtype(np.float64): torch.float64, np.dtype(np.float32): torch.float32,
-                 np.dtype(np.int64): torch.int64, np.dtype(np.bool_): torch.bool}

@@ -248,7 +248,8 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     for s, folder in enumerate(runs):
         write_train_info(folder, {"algo": "ppo_gpu", "env_id": tether_gym.ENV_ID,
                                "seed": seeds[s], "seeds_in_process": S, "device": device_name,
-                               "command": command, "tether_gym": tether_gym.__version__,
+                               "backend": run.backend, "command": command,
+                               "tether_gym": tether_gym.__version__,
                                "torch": torch.__version__, "status": "finished",
                                "num_timesteps": steps, "wall_time_s": round(wall, 1),
                                "final_training_distribution": {

@@ -25,13 +25,15 @@ from tether_gym.tasks.reward import COMPONENTS
 from tether_gym.tasks.termination import TUMBLE_ANGLE, Failure
 
 from . import chain
+from .row_step import NumbaCpuStep, check_cpu
 
 __all__ = ["TorchTetherVecEnv", "chain_consts", "resolve_device", "AUTORESET_MODES",
            "BACKENDS", "check_backend"]
 
-BACKENDS = ("torch", "numba-cuda")
-"""``torch``: the step as torch operations (:mod:`.chain`), on any device; ``numba-cuda``:
-the numba env's own row step compiled for a CUDA GPU (:mod:`.numba_cuda`)."""
+BACKENDS = ("torch", "numba", "numba-cuda")
+"""``torch``: the step as torch operations (:mod:`.chain`), on any device; ``numba``: the
+numba env's own compiled row step on CPU tensors (:class:`.row_step.NumbaCpuStep`);
+``numba-cuda``: that row step compiled for a CUDA GPU (:mod:`.numba_cuda`)."""
 
 AUTORESET_MODES = ("next_step", "same_step")
 """``next_step``: gymnasium's default, as the native vector env; ``same_step``: an ended
@@ -69,19 +71,23 @@ def check_backend(backend: str, device: torch.device, dtype=torch.float64,
                   compile: bool = False) -> None:
     """A ValueError unless ``backend`` (:data:`BACKENDS`) can run with these settings.
 
-    ``numba-cuda`` runs the numba kernel in float64 on a CUDA device and compiles it
-    itself (no ``compile``).
+    ``numba`` (CPU) and ``numba-cuda`` (a CUDA device) run the numba kernel in float64
+    and compile it themselves (no ``compile``).
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend={backend!r} must be one of {BACKENDS}")
-    if backend == "numba-cuda":
-        if compile or dtype != torch.float64:
-            raise ValueError(f'backend="numba-cuda" runs the numba kernel in float64 and '
-                             f"compiles it itself: compile={compile!r} must be False and "
-                             f"dtype={dtype!r} torch.float64")
-        from .numba_cuda import check_device
+    if backend == "torch":
+        return
+    if compile or dtype != torch.float64:
+        raise ValueError(f"backend={backend!r} runs the numba kernel in float64 and "
+                         f"compiles it itself: compile={compile!r} must be False and "
+                         f"dtype={dtype!r} torch.float64")
+    if backend == "numba":
+        check_cpu(device)
+        return
+    from .numba_cuda import check_device
 
-        check_device(device)
+    check_device(device)
 
 
 def chain_consts(config: EnvConfig, device, dtype=torch.float64) -> chain.ChainConsts:
@@ -166,11 +172,12 @@ class TorchTetherVecEnv:
     ``"nonfinite"``), ``compile`` (True: the step's arithmetic, :func:`~.chain.control_step`,
     runs through ``torch.compile``, fused into few kernels; its first step compiles, tens
     of seconds), ``backend`` (``"torch"``, default: the step as torch operations;
-    ``"numba-cuda"``: the step and the reset's evaluation by the numba env's own row
-    code, :func:`tether_gym.envs.step_kernel.step_row`, compiled for the GPU by
-    numba-cuda, one kernel launch per step; CUDA devices only, float64, no
-    ``compile``; the draws and the autoreset stay torch's), and every keyword argument
-    of ``gym.make``.
+    ``"numba"``: the step and the reset's evaluation by the numba env's own row code,
+    :func:`tether_gym.envs.step_kernel.step_row`, compiled by numba, on CPU tensors, one
+    thread; a NaN or inf action then raises ValueError whatever ``check_actions`` says;
+    ``"numba-cuda"``: that row code compiled for the GPU by numba-cuda, one kernel
+    launch per step, CUDA devices only; both float64 and no ``compile``; the draws and
+    the autoreset stay torch's), and every keyword argument of ``gym.make``.
     """
 
     def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
@@ -206,9 +213,12 @@ class TorchTetherVecEnv:
             return chain.control_step(*tensors, cc)
 
         self.backend = backend
-        self._kernel: Any = None  # the numba-cuda step, with backend "numba-cuda"
+        self._kernel: Any = None  # the numba row step, with backend "numba" or "numba-cuda"
         self._control_step: Any
-        if backend == "numba-cuda":
+        if backend == "numba":
+            self._kernel = NumbaCpuStep(self.config, self.num_envs, self.device)
+            self._control_step = self._kernel
+        elif backend == "numba-cuda":
             from .numba_cuda import NumbaCudaStep
 
             self._kernel = NumbaCudaStep(self.config, self.num_envs, self.device)

@@ -68,7 +68,8 @@ def test_cuda_without_a_gpu_is_a_clear_error(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("extra, message", [
-    (["--backend", "numba"], "backend='numba' must be one of"),
+    (["--backend", "jax"], "backend='jax' must be one of"),
+    (["--backend", "numba", "--compile"], "compile=True must be False"),
     (["--backend", "numba-cuda", "--compile"], "compile=True must be False"),
     (["--backend", "numba-cuda"], "needs a CUDA device, got device='cpu'"),
 ])
@@ -91,3 +92,17 @@ def test_the_device_scripts_configs_load():
     for f in files:
         settings, steps, env_kwargs, checkpoints = read_config(f)
         assert steps >= settings.n_envs * settings.n_steps and env_kwargs
+
+
+def test_numba_backend_trains_what_the_torch_backend_trains(tmp_path):
+    """Same seed and budget: the numba backend's run ends with the torch backend's weights."""
+    weights = {}
+    for backend in ("torch", "numba"):
+        out = tmp_path / backend
+        assert train_main(["gpu", "--n-envs", "8", "--timesteps", "512", "--device", "cpu",
+                           "--backend", backend, "--out", str(out)]) == 0
+        weights[backend] = load_agent(out / "seed_0")[0].state_dict()
+        info = json.loads((out / "seed_0" / "train_info.json").read_text())
+        assert info["num_timesteps"] >= 512 and info["backend"] == backend
+    for name, w in weights["torch"].items():  # bitwise equal when written (2026-12-06)
+        assert (weights["numba"][name] - w).abs().max() <= 1e-6 * (1.0 + w.abs().max()), name

@@ -41,9 +41,9 @@ def test_equality_tests_pass_through_the_kernel():
 
 
 def test_backend_refusals():
-    assert BACKENDS == ("torch", "numba-cuda")
-    with pytest.raises(ValueError, match="backend='numba' must be one of"):
-        TorchTetherVecEnv(2, backend="numba")
+    assert BACKENDS == ("torch", "numba", "numba-cuda")
+    with pytest.raises(ValueError, match="backend='jax' must be one of"):
+        TorchTetherVecEnv(2, backend="jax")
     with pytest.raises(ValueError, match="compile=True must be False"):
         TorchTetherVecEnv(2, backend="numba-cuda", compile=True)
     with pytest.raises(ValueError, match="dtype=torch.float32"):
