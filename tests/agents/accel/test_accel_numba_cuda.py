@@ -9,11 +9,6 @@ device session runs the same files with ``TETHER_TEST_DEVICE=cuda`` for the GPU'
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import pytest
 
 pytest.importorskip("torch")
@@ -23,21 +18,11 @@ import torch  # noqa: E402
 from tether_gym_agents.accel import numba_cuda  # noqa: E402
 from tether_gym_agents.accel.vec_env import BACKENDS, TorchTetherVecEnv  # noqa: E402
 
-HERE = Path(__file__).parent
-
 
 @pytest.mark.slow
-def test_equality_tests_pass_through_the_kernel():
+def test_equality_tests_pass_through_the_kernel(equality_tests_pass):
     """test_accel_chain (one step, 1e-12) and the episode/start/autoreset tests, simulated."""
-    env = {**os.environ, "NUMBA_ENABLE_CUDASIM": "1", "TETHER_TEST_BACKEND": "numba-cuda",
-           "TETHER_TEST_DEVICE": "cpu", "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-           str(HERE / "test_accel_chain.py"), str(HERE / "test_accel_vec_env.py"),
-           "-k", "equal_numba or equals_numba or autoreset"]
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
-    tail = (done.stdout + done.stderr)[-3000:]
-    assert done.returncode == 0, tail
-    assert " passed" in tail and "skipped" not in tail and "deselected" in tail, tail
+    equality_tests_pass(NUMBA_ENABLE_CUDASIM="1", TETHER_TEST_BACKEND="numba-cuda")
 
 
 def test_backend_refusals():

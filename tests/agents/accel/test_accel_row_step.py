@@ -7,11 +7,6 @@ with it (``TETHER_TEST_BACKEND=numba``, read at their import: a subprocess).
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -21,21 +16,11 @@ import torch  # noqa: E402
 
 from tether_gym_agents.accel.vec_env import TorchTetherVecEnv, check_backend  # noqa: E402
 
-HERE = Path(__file__).parent
-
 
 @pytest.mark.slow
-def test_equality_tests_pass_through_the_numba_backend():
+def test_equality_tests_pass_through_the_numba_backend(equality_tests_pass):
     """One step at 1e-12, whole episodes at 1e-9, starts and both autoresets, via numba."""
-    env = {**os.environ, "TETHER_TEST_BACKEND": "numba", "TETHER_TEST_DEVICE": "cpu",
-           "OMP_NUM_THREADS": "1", "NUMBA_NUM_THREADS": "1"}
-    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
-           str(HERE / "test_accel_chain.py"), str(HERE / "test_accel_vec_env.py"),
-           "-k", "equal_numba or equals_numba or autoreset"]
-    done = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
-    tail = (done.stdout + done.stderr)[-3000:]
-    assert done.returncode == 0, tail
-    assert " passed" in tail and "skipped" not in tail and "deselected" in tail, tail
+    equality_tests_pass(TETHER_TEST_BACKEND="numba")
 
 
 def test_numba_and_torch_backends_give_the_same_rollout():
