@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # The second CPU session's study of issue 34 (experiments/issue34/README.md, "What D
-# lacks"): cfgs E and F (torch backend) and G and H (numba backend), seeds 0-1 in one
-# process each; G's seeds 2-5 and 6-9, four per process; then the default-suite scores
-# and G's learning curves against wall time. Two processes at a time (one per core, one
-# thread each); resumable: a run folder with its agent is skipped. About 40 minutes on
-# the 2-core development machine. Run it with the project's environment active.
+# lacks"): cfgs E and F (torch backend) and G-J (numba backend), seeds 0-1 in one
+# process each; G's and J's seeds 2-5 and 6-9, four per process; then the default-suite
+# scores and G's and J's learning curves against wall time. Two processes at a time (one
+# per core, one thread each); resumable: a run folder with its agent is skipped. About
+# two hours on the 2-core development machine. Run it with the project's environment
+# active.
 set -u
 cd "$(dirname "$0")/../.."
 export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
@@ -21,11 +22,17 @@ train E torch 2 0 E
 train F torch 2 0 F
 train G numba 2 0 G
 train H numba 2 0 H
-train G numba 4 2 G_from2
-train G numba 4 6 G_from6
+train I numba 2 0 I
+train J numba 2 0 J
+for X in G J; do
+  train $X numba 4 2 ${X}_from2
+  train $X numba 4 6 ${X}_from6
+done
 wait
-mkdir -p $R/G_ten
-cp -r $R/G/seed_* $R/G_from2/seed_* $R/G_from6/seed_* $R/G_ten/
-python evaluate.py $R/E $R/F $R/G $R/H ppo_fast --no-plots --out $R/eval_two_seeds
-python evaluate.py $R/G_ten ppo_fast --no-plots --out $R/eval_G_ten
-python evaluate.py curves $R/G_ten --rms 7e-3 --out $R/curves_G_ten
+python evaluate.py $R/E $R/F $R/G $R/H $R/I $R/J ppo_fast --no-plots --out $R/eval_two_seeds
+for X in G J; do
+  mkdir -p $R/${X}_ten
+  cp -r $R/$X/seed_* $R/${X}_from2/seed_* $R/${X}_from6/seed_* $R/${X}_ten/
+  python evaluate.py $R/${X}_ten ppo_fast --no-plots --out $R/eval_${X}_ten
+  python evaluate.py curves $R/${X}_ten --rms 7e-3 --out $R/curves_${X}_ten
+done
