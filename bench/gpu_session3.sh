@@ -7,16 +7,16 @@
 #      at 1e-9, starts, autoreset), failures with their size;
 #   3. env throughput at 65,536 and 1,048,576 envs: torch eager, numba-cuda, and the
 #      torch.compile'd core (bench/gpu_throughput.py);
-#   4. one seed of G (cfg/G.yml: ppo_fast's sizes and schedule on the home-made learner,
-#      which reach ppo_fast's quality on the CPU in 5.5M env steps; D and E, with
-#      GPU-sized rollouts, stop at 0.02 rad: experiments/issue34/README.md) on the
-#      numba-cuda backend, 50 s of training (the learning rate falls to 0 at the time
-#      budget);
-#   5. ten seeds of G in one process, 150 s, on the numba-cuda backend if step 4 wrote
+#   4. one seed of J (cfg/J.yml: ppo_fast's 64-step rollouts, 80 gradient steps and 1,343
+#      iterations with twice its envs and minibatch; on the CPU it tracks at half
+#      ppo_fast's error in 11M env steps, where D and E, with 16-step rollouts and 245
+#      iterations, stop at 0.02 rad: experiments/issue34/README.md) on the numba-cuda
+#      backend, 50 s of training (the learning rate falls to 0 at the time budget);
+#   5. ten seeds of J in one process, 150 s, on the numba-cuda backend if step 4 wrote
 #      its run, else on the torch backend: the candidate for the shipped row.
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
-#   experiments/issue34/cfg/G.yml) is left for a session with time to spare.
+#   experiments/issue34/cfg/J.yml) is left for a session with time to spare.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
@@ -41,17 +41,17 @@ timeout 200 python3 bench/gpu_throughput.py --device cuda --envs 65536 1048576 -
     --backend torch numba-cuda --compile --out $OUT/bench3.json
 fi
 if [ "$PART" = train ]; then
-echo "== 4. one seed of G, numba-cuda backend"
+echo "== 4. one seed of J, numba-cuda backend"
 t=$(date +%s.%N)
-timeout 90 python3 train.py gpu --config experiments/issue34/cfg/G.yml --seeds 1 \
-    --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_G_numba_cuda
+timeout 90 python3 train.py gpu --config experiments/issue34/cfg/J.yml --seeds 1 \
+    --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_J_numba_cuda
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 backend=torch
-[ -f runs_gpu/single_G_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
-echo "== 5. ten seeds of G, backend $backend"
+[ -f runs_gpu/single_J_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
+echo "== 5. ten seeds of J, backend $backend"
 t=$(date +%s.%N)
-timeout 190 python3 train.py gpu --config experiments/issue34/cfg/G.yml --seeds 10 \
-    --backend $backend --max-seconds 150 --device cuda --out runs_gpu/ten_G
+timeout 190 python3 train.py gpu --config experiments/issue34/cfg/J.yml --seeds 10 \
+    --backend $backend --max-seconds 150 --device cuda --out runs_gpu/ten_J
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3.tar.gz runs_gpu
 fi
