@@ -181,12 +181,14 @@ def numba_cuda_probe(num):
 
 
 def main(argv=None) -> int:
+    from tether_gym_agents.accel.vec_env import BACKENDS
+
     p = argparse.ArgumentParser()
     p.add_argument("--device", default="cpu")
     p.add_argument("--envs", type=int, nargs="+", default=[256, 4096])
     p.add_argument("--steps", type=int, default=20)
     p.add_argument("--backend", nargs="+", default=["torch"],
-                   choices=["torch", "numba", "numba-cuda"],
+                   choices=BACKENDS,
                    help="TorchTetherVecEnv backends to time (numba: CPU only; numba-cuda: "
                         "CUDA devices only)")
     p.add_argument("--numba", action="store_true")

@@ -64,7 +64,6 @@ class RowStep:
     action: torch.Tensor
 
     def __init__(self, config: EnvConfig, num: int, device: torch.device):
-        self.config = config
         self.device = device
         self.num = int(num)
 

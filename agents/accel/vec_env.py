@@ -217,11 +217,11 @@ class TorchTetherVecEnv:
         self._control_step: Any
         if backend == "numba":
             self._kernel = NumbaCpuStep(self.config, self.num_envs, self.device)
-            self._control_step = self._kernel
         elif backend == "numba-cuda":
             from .numba_cuda import NumbaCudaStep
 
             self._kernel = NumbaCudaStep(self.config, self.num_envs, self.device)
+        if self._kernel is not None:
             self._control_step = self._kernel
         else:
             self._control_step = (torch.compile(control_step, dynamic=False) if compile

@@ -14,7 +14,7 @@ HERE = Path(__file__).parent
 
 @pytest.fixture
 def equality_tests_pass():
-    """Run test_accel_chain's and test_accel_vec_env's equality tests under ``env``.
+    """Run test_accel_chain's and test_accel_vec_env's equality tests in a subprocess.
 
     Calling it with environment overrides (``TETHER_TEST_BACKEND`` and the like, read by
     those files at import: hence a subprocess) asserts that they all pass, none skipped.
