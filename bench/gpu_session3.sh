@@ -13,10 +13,11 @@
 #      iterations, stop at 0.02 rad: experiments/issue34/README.md) on the numba-cuda
 #      backend, 50 s of training (the learning rate falls to 0 at the time budget);
 #   5. ten seeds of J in one process, 150 s, on the numba-cuda backend if step 4 wrote
-#      its run, else on the torch backend: the candidate for the shipped row.
+#      its run, else on the torch backend: the GPU-trained candidate for the `ppo_accel`
+#      row, which ships J trained on the CPU (docs/gpu.md).
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
-#   experiments/issue34/cfg/J.yml) is left for a session with time to spare.
+#   configs/gpu_ppo.yml) is left for a session with time to spare.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
@@ -43,14 +44,14 @@ fi
 if [ "$PART" = train ]; then
 echo "== 4. one seed of J, numba-cuda backend"
 t=$(date +%s.%N)
-timeout 90 python3 train.py gpu --config experiments/issue34/cfg/J.yml --seeds 1 \
+timeout 90 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 \
     --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_J_numba_cuda
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 backend=torch
 [ -f runs_gpu/single_J_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
 echo "== 5. ten seeds of J, backend $backend"
 t=$(date +%s.%N)
-timeout 190 python3 train.py gpu --config experiments/issue34/cfg/J.yml --seeds 10 \
+timeout 190 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 10 \
     --backend $backend --max-seconds 150 --device cuda --out runs_gpu/ten_J
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3.tar.gz runs_gpu

@@ -6,9 +6,9 @@ baselines that need neither torch nor a trained agent (``smc``, and ``predictive
 the one whose figures moved in the trailing digits on another machine) on three of the
 default suite's scenarios, through the library call ``evaluate.py`` makes, and compares
 each episode with its shipped record; the rows of issue 36 (the distilled students,
-their PPO fine-tunes, the fine-tunes behind the safety filter and the residual SAC) are
-re-run on one scenario, two episodes per training run. ``ms/step`` is a wall time and
-is not compared.
+their PPO fine-tunes, the fine-tunes behind the safety filter and the residual SAC) and
+issue 34's ``ppo_accel`` (trained by ``train.py gpu``) are re-run on one scenario, two
+episodes per training run. ``ms/step`` is a wall time and is not compared.
 """
 
 from __future__ import annotations
@@ -70,8 +70,9 @@ def test_shipped_episodes_of_the_main_job_reproduce(tmp_path):
     assert _compare(want, episodes) > 400
 
 
-LEARNED = ("distill_bc", "distill_ppo", "sac_residual", "filtered:distill_ppo")
-"""The rows of issue 36; each is re-run on one scenario, two episodes per training run."""
+LEARNED = ("distill_bc", "distill_ppo", "sac_residual", "filtered:distill_ppo", "ppo_accel")
+"""The rows of issue 36 and issue 34's `ppo_accel`; each is re-run on one scenario, two
+episodes per training run."""
 
 
 @pytest.mark.parametrize("policy", LEARNED)

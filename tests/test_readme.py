@@ -28,6 +28,8 @@ TRAIN_TINY = ("--timesteps", "64", "--n-envs", "1", "--eval-episodes", "1", "--n
 EVAL_TINY = ("--seeds", "1", "--no-plots")
 SHORT_EPISODES = ("--env-kwargs", "orbits_per_episode=0.2")  # only where no --env-kwargs
 RAY = "a Ray fan-out of full-budget seeds (tests/agents/training cover --seeds on Ray)"
+ACCEL = ("a full-budget train.py gpu process (tests/agents/accel/test_accel_cli.py trains "
+         "tiny ones; test_shipped_commands.py resolves these)")
 
 COMMANDS: dict[str, tuple[str, ...] | str] = {
     # Training your own (in this order: later commands use the earlier run folders)
@@ -63,12 +65,19 @@ COMMANDS: dict[str, tuple[str, ...] | str] = {
     "python train.py --config configs/ppo_fast.yml --seed K --out runs/ppo_fast/seed_K":
         "K stands for each seed 0 ... 4 of the shipped agents (about 10 min each; "
         "tests/agents/training/test_shipped_commands.py resolves them)",
+    "python train.py gpu --config configs/gpu_ppo.yml --seeds 2 --seed 0 --device cpu "
+    "--backend numba --out runs/ppo_accel": ACCEL,
+    "python train.py gpu --config configs/gpu_ppo.yml --seeds 4 --seed 2 --device cpu "
+    "--backend numba --out runs/ppo_accel": ACCEL,
+    "python train.py gpu --config configs/gpu_ppo.yml --seeds 4 --seed 6 --device cpu "
+    "--backend numba --out runs/ppo_accel": ACCEL,
     "python evaluate.py curves runs/ppo --out docs/curves/ppo":
         "needs the five ppo runs with their checkpoints (tests/agents/evaluation/"
         "test_curves.py runs the command on tiny runs)",
     "python evaluate.py curves docs/curves/ppo docs/curves/ppo_symlog docs/curves/ppo_g025 "
     "docs/curves/ppo_fast docs/curves/sac docs/curves/smc_residual docs/curves/distill_ppo "
-    "docs/curves/sac_residual --out docs/curves":
+    "docs/curves/sac_residual docs/curves/filtered_distill_ppo docs/curves/ppo_accel "
+    "--out docs/curves":
         "rewrites the shipped side-by-side curves (test_curves.py puts written curves side "
         "by side)",
     "python train.py --algo sac --config configs/sac.yml --seeds 5 --out runs/sac": RAY,

@@ -20,9 +20,11 @@ ROOT = Path(__file__).resolve().parents[1]
 SUITES = {
     "default": ["docs/eval", "docs/eval_mpc"],
     "robust": ["docs/eval_robust", "docs/eval_robust/mpc", "docs/eval_robust/distill",
-               "docs/eval_robust/sac_residual", "docs/eval_robust/filtered_distill_ppo"],
+               "docs/eval_robust/sac_residual", "docs/eval_robust/filtered_distill_ppo",
+               "docs/eval_robust/ppo_accel"],
     "beyond": ["docs/eval_beyond", "docs/eval_beyond/mpc", "docs/eval_beyond/distill",
-               "docs/eval_beyond/sac_residual", "docs/eval_beyond/filtered_distill_ppo"],
+               "docs/eval_beyond/sac_residual", "docs/eval_beyond/filtered_distill_ppo",
+               "docs/eval_beyond/ppo_accel"],
 }
 
 

@@ -106,3 +106,21 @@ def test_numba_backend_trains_what_the_torch_backend_trains(tmp_path):
         assert info["num_timesteps"] >= 512 and info["backend"] == backend
     for name, w in weights["torch"].items():  # bitwise equal when written (2026-12-06)
         assert (weights["numba"][name] - w).abs().max() <= 1e-6 * (1.0 + w.abs().max()), name
+
+
+def test_a_process_of_seeds_reproduces_and_its_seeds_depend_on_the_group(tmp_path):
+    """The rule behind the shipped ``ppo_accel`` seeds' ``command.txt`` (docs/gpu.md): the
+    same call gives bitwise the same weights for every seed, and a seed trained in a
+    group of two is not the seed trained alone (one generator starts the whole group),
+    so a seed is retrained by rerunning its group's command."""
+    def weights(argv, folder, seed):
+        out = tmp_path / folder
+        assert train_main(["gpu", "--n-envs", "4", "--timesteps", "256", "--device", "cpu",
+                           "--out", str(out), *argv]) == 0
+        return load_agent(out / f"seed_{seed}")[0].state_dict()
+
+    first = weights(["--seeds", "2", "--seed", "0"], "a", 1)
+    again = weights(["--seeds", "2", "--seed", "0"], "b", 1)
+    alone = weights(["--seeds", "1", "--seed", "1"], "c", 1)
+    assert all((first[k] == again[k]).all() for k in first)
+    assert not (first["action_net.weight"] == alone["action_net.weight"]).all()

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import shlex
+from dataclasses import asdict
 from pathlib import Path
 
 import pytest
@@ -31,8 +32,15 @@ def _is_distill(run: Path) -> bool:
     return json.loads((run / "train_info.json").read_text()).get("algo") == "dagger"
 
 
-SEEDS = [(name, run) for name, run in ALL_SEEDS if not _is_distill(run)]
-"""The seeds trained by reinforcement learning (``train.py`` with a config)."""
+def _is_accel(run: Path) -> bool:
+    """A seed trained by ``train.py gpu`` (env and learner on one torch device, issue 34)."""
+    return json.loads((run / "train_info.json").read_text()).get("algo") == "ppo_gpu"
+
+
+SEEDS = [(name, run) for name, run in ALL_SEEDS if not _is_distill(run) and not _is_accel(run)]
+"""The seeds trained by stable-baselines3 (``train.py`` with a config)."""
+ACCEL = [(name, run) for name, run in ALL_SEEDS if _is_accel(run)]
+"""The seeds trained by ``train.py gpu``, several in one process (issue 34)."""
 DISTILLED = [(name, run) for name, run in ALL_SEEDS if _is_distill(run)]
 """The seeds fitted by ``train.py distill`` on the shared mpc dataset (issue 36)."""
 
@@ -52,6 +60,41 @@ def test_every_shipped_agent_has_seeds():
     assert {name for name, _ in SEEDS} >= {"ppo", "ppo_symlog", "ppo_g025", "smc_residual",
                                            "ppo_fast", "sac", "distill_ppo", "sac_residual"}
     assert {name for name, _ in DISTILLED} == {"distill_bc"}
+    assert {name for name, _ in ACCEL} == {"ppo_accel"}
+    assert len(ACCEL) == 10
+
+
+@pytest.mark.parametrize(("name", "run"), ACCEL, ids=[f"{n}-{r.name}" for n, r in ACCEL])
+def test_an_accel_seeds_command_is_its_process(name, run, monkeypatch):
+    """``command.txt`` of a ``train.py gpu`` seed is the one call that trained it with the
+    other seeds of its process (their weights depend on the whole group: one generator
+    starts them all). It parses with ``train.py gpu``'s parser; its config resolves to
+    the hyperparameters and env arguments the seed's ``config.yml`` records; the seed is
+    one of the call's; the device, backend and seeds per process are ``train_info.json``'s,
+    and the env steps are the config's budget in whole rollouts."""
+    from tether_gym_agents.accel.cli import build_parser as gpu_parser
+    from tether_gym_agents.accel.cli import read_config as read_gpu_config
+
+    monkeypatch.chdir(REPO)
+    line = (run / "command.txt").read_text().strip()
+    assert "\n" not in line
+    words = _argv(line)
+    assert words[0] == "gpu"
+    args = gpu_parser().parse_args(words[1:])
+    seed = int(run.name.split("_")[1])
+    assert args.seed <= seed < args.seed + args.seeds
+    settings, steps, env_kwargs, _ = read_gpu_config(args.config)
+    recorded = read_config(run)
+    assert recorded["algo"] == "ppo_gpu" and recorded["hyperparams"]["n_timesteps"] == steps
+    hyper = {k: v for k, v in recorded["hyperparams"].items() if k != "n_timesteps"}
+    assert json.loads(json.dumps(hyper)) == json.loads(json.dumps(asdict(settings)))
+    assert _env(env_kwargs) == _env(recorded["env_kwargs"])
+    info = json.loads((run / "train_info.json").read_text())
+    assert (info["seed"], info["seeds_in_process"], info["device"], info["backend"]) == (
+        seed, args.seeds, args.device, args.backend)
+    assert info["status"] == "finished" and info["wall_time_s"] > 0
+    rollout = settings.n_envs * settings.n_steps
+    assert steps <= info["num_timesteps"] < steps + rollout
 
 
 @pytest.mark.parametrize(("name", "run"), DISTILLED, ids=[f"{n}-{r.name}" for n, r in DISTILLED])
