@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # The second CPU session's study of issue 34 (experiments/issue34/README.md, "What D
-# lacks"): cfgs E and F (torch backend) and G-J (numba backend), seeds 0-1 in one
+# lacks"): cfgs E and F (torch backend) and G-K (numba backend), seeds 0-1 in one
 # process each; G's and J's seeds 2-5 and 6-9, four per process; then the default-suite
 # scores and G's and J's learning curves against wall time. Two processes at a time (one
 # per core, one thread each); resumable: a run folder with its agent is skipped. About
@@ -24,12 +24,13 @@ train G numba 2 0 G
 train H numba 2 0 H
 train I numba 2 0 I
 train J numba 2 0 J
+train K numba 2 0 K
 for X in G J; do
   train $X numba 4 2 ${X}_from2
   train $X numba 4 6 ${X}_from6
 done
 wait
-python evaluate.py $R/E $R/F $R/G $R/H $R/I $R/J ppo_fast --no-plots --out $R/eval_two_seeds
+python evaluate.py $R/E $R/F $R/G $R/H $R/I $R/J $R/K ppo_fast --no-plots --out $R/eval_two_seeds
 for X in G J; do
   mkdir -p $R/${X}_ten
   cp -r $R/$X/seed_* $R/${X}_from2/seed_* $R/${X}_from6/seed_* $R/${X}_ten/
