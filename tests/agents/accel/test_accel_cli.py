@@ -94,14 +94,19 @@ def test_the_device_scripts_configs_load():
         assert steps >= settings.n_envs * settings.n_steps and env_kwargs
 
 
+def _trained(out, *argv, seed=0):
+    """A tiny ``train.py gpu`` run on the CPU into ``out``: seed ``seed``'s weights."""
+    assert train_main(["gpu", "--device", "cpu", "--out", str(out), *argv]) == 0
+    return load_agent(out / f"seed_{seed}")[0].state_dict()
+
+
 def test_numba_backend_trains_what_the_torch_backend_trains(tmp_path):
     """Same seed and budget: the numba backend's run ends with the torch backend's weights."""
     weights = {}
     for backend in ("torch", "numba"):
         out = tmp_path / backend
-        assert train_main(["gpu", "--n-envs", "8", "--timesteps", "512", "--device", "cpu",
-                           "--backend", backend, "--out", str(out)]) == 0
-        weights[backend] = load_agent(out / "seed_0")[0].state_dict()
+        weights[backend] = _trained(out, "--n-envs", "8", "--timesteps", "512",
+                                    "--backend", backend)
         info = json.loads((out / "seed_0" / "train_info.json").read_text())
         assert info["num_timesteps"] >= 512 and info["backend"] == backend
     for name, w in weights["torch"].items():  # bitwise equal when written (2026-12-06)
@@ -113,14 +118,9 @@ def test_a_process_of_seeds_reproduces_and_its_seeds_depend_on_the_group(tmp_pat
     same call gives bitwise the same weights for every seed, and a seed trained in a
     group of two is not the seed trained alone (one generator starts the whole group),
     so a seed is retrained by rerunning its group's command."""
-    def weights(argv, folder, seed):
-        out = tmp_path / folder
-        assert train_main(["gpu", "--n-envs", "4", "--timesteps", "256", "--device", "cpu",
-                           "--out", str(out), *argv]) == 0
-        return load_agent(out / f"seed_{seed}")[0].state_dict()
-
-    first = weights(["--seeds", "2", "--seed", "0"], "a", 1)
-    again = weights(["--seeds", "2", "--seed", "0"], "b", 1)
-    alone = weights(["--seeds", "1", "--seed", "1"], "c", 1)
+    tiny = ("--n-envs", "4", "--timesteps", "256")
+    first = _trained(tmp_path / "a", *tiny, "--seeds", "2", "--seed", "0", seed=1)
+    again = _trained(tmp_path / "b", *tiny, "--seeds", "2", "--seed", "0", seed=1)
+    alone = _trained(tmp_path / "c", *tiny, "--seeds", "1", "--seed", "1", seed=1)
     assert all((first[k] == again[k]).all() for k in first)
     assert not (first["action_net.weight"] == alone["action_net.weight"]).all()

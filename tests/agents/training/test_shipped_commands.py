@@ -27,21 +27,17 @@ ALL_SEEDS = [(name, run) for name, path in sorted(pretrained_agents().items())
              for run in sorted(Path(path).glob("seed_*"))]
 
 
-def _is_distill(run: Path) -> bool:
-    """A seed fitted by ``train.py distill`` (what its ``train_info.json`` records)."""
-    return json.loads((run / "train_info.json").read_text()).get("algo") == "dagger"
+def _trained_by(run: Path) -> str | None:
+    """The ``algo`` a seed's ``train_info.json`` records: ``dagger`` for a seed fitted by
+    ``train.py distill``, ``ppo_gpu`` for one trained by ``train.py gpu`` (issue 34)."""
+    return json.loads((run / "train_info.json").read_text()).get("algo")
 
 
-def _is_accel(run: Path) -> bool:
-    """A seed trained by ``train.py gpu`` (env and learner on one torch device, issue 34)."""
-    return json.loads((run / "train_info.json").read_text()).get("algo") == "ppo_gpu"
-
-
-SEEDS = [(name, run) for name, run in ALL_SEEDS if not _is_distill(run) and not _is_accel(run)]
+SEEDS = [(name, run) for name, run in ALL_SEEDS if _trained_by(run) not in ("dagger", "ppo_gpu")]
 """The seeds trained by stable-baselines3 (``train.py`` with a config)."""
-ACCEL = [(name, run) for name, run in ALL_SEEDS if _is_accel(run)]
+ACCEL = [(name, run) for name, run in ALL_SEEDS if _trained_by(run) == "ppo_gpu"]
 """The seeds trained by ``train.py gpu``, several in one process (issue 34)."""
-DISTILLED = [(name, run) for name, run in ALL_SEEDS if _is_distill(run)]
+DISTILLED = [(name, run) for name, run in ALL_SEEDS if _trained_by(run) == "dagger"]
 """The seeds fitted by ``train.py distill`` on the shared mpc dataset (issue 36)."""
 
 
