@@ -2,7 +2,10 @@
 # The one device session of issue 34, as run on the lent GPU machine (through the device
 # tool: this repository's root is the working directory, $OUT comes back). About 8 minutes:
 #   1. the torch step equal to the numba step on the GPU (tests/agents/accel/test_accel_chain.py);
-#   2. env throughput at 4096 .. 1M envs (bench/gpu_throughput.py) and the numba-cuda probe;
+#   2. env throughput at 4096 .. 1M envs (bench/gpu_throughput.py; as run that day it also
+#      passed --numba-cuda, a probe that compiled kernels.advance_one into a CUDA kernel and
+#      failed inside numba-cuda (docs/gpu.md); the probe is gone: bench/numba_cuda_ptx.py
+#      compiles the step without a GPU, and --backend numba-cuda times it);
 #   3. one seed of each candidate recipe (experiments/issue34/cfg/{A,B,C}.yml), 45 s each;
 #   4. ten seeds in one process of the candidate whose final deterministic episodes on the
 #      training distribution (not a benchmark suite) return the most, 140 s;
@@ -18,7 +21,7 @@ echo "== 1. equality on the GPU"
 TETHER_TEST_DEVICE=cuda timeout 90 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_chain.py 2>&1 | tail -3
 echo "== 2. throughput"
 timeout 100 python3 bench/gpu_throughput.py --device cuda --envs 4096 65536 262144 1048576 \
-    --steps 10 --numba-cuda --out $OUT/bench.json
+    --steps 10 --out $OUT/bench.json
 echo "== 3. one seed per candidate"
 for c in A B C; do
   t=$(stamp)

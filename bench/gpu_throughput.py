@@ -10,10 +10,10 @@ float64, the ppo training distribution's env kwargs, zero actions, autoreset on)
 warm-up steps, timed over whole steps with the device synchronised. ``--numba`` times
 the native vector env (``gym.make_vec``, one thread) at the same sizes in the same run;
 ``--backend torch numba numba-cuda`` times those backends of the env (``reset_s``: construction
-and first reset, which includes numba-cuda's compile of the step kernel on a cold cache);
-``--numba-cuda`` probes whether numba-cuda compiles the existing numba kernel
-(``tether_gym.physics.kernels.advance_one``) into a CUDA kernel, and times it when it
-does. Prints one line per measurement and writes them as JSON.
+and first reset, which includes numba-cuda's compile of the step kernel on a cold cache).
+Prints one line per measurement and writes them as JSON. (Whether numba-cuda compiles
+the numba env's step at all, with its registers and spills, is ``bench/numba_cuda_ptx.py``,
+which needs no GPU.)
 """
 
 from __future__ import annotations
@@ -24,7 +24,6 @@ import os
 import platform
 import sys
 import time
-import traceback
 
 import numpy as np
 
@@ -125,61 +124,6 @@ def numba_rate(num, steps, warmup=3):
             "env_steps_per_s": num / dt}
 
 
-def numba_cuda_probe(num):
-    """Compile a CUDA kernel that calls the existing numba step of one chain per thread."""
-    out = {"what": "numba-cuda probe", "envs": num}
-    if not hasattr(np, "row_stack"):
-        out["shim"] = "np.row_stack = np.vstack"  # as tether_gym_agents.accel.numba_cuda does
-    try:
-        from tether_gym.envs.config import EnvConfig
-        from tether_gym.physics import kernels
-        from tether_gym.physics.kernels import Scratch, StepInputs, StepOutputs, Substeps
-        from tether_gym_agents.accel.numba_cuda import cuda  # with its numpy shim
-
-        out["numba_cuda"] = getattr(cuda, "__version__", "?")
-        config = EnvConfig.from_kwargs()
-        n = config.n_tethers
-        par = np.tile(config.param_rows(config.eccentricity, config.masses), (num, 1))
-        y = np.tile(np.array([0.1, 0.0, 0.2, 0.2, 0.5, 0.5, 0.0, 0.0]), (num, 1))
-        nu = np.zeros(num)
-        cmd = np.zeros((num, n))
-        dist = np.zeros((num, n))
-        advance = kernels.advance_one
-
-        @cuda.jit
-        def step(nu, y, cmd, dist, par, S_, R, V, ten, k1, k2, k3, k4, tmp, orb, tmin, der,
-                 tout):
-            b = cuda.grid(1)
-            if b < y.shape[0]:
-                work = Scratch(S_[b], R[b], V[b], ten[b], k1[b], k2[b], k3[b], k4[b], tmp[b],
-                               orb[b])
-                nu[b] = advance(nu[b], y[b], StepInputs(cmd[b], dist[b]), par[b],
-                                Substeps(0.0125, 2), work, StepOutputs(tmin[b], der[b], tout[b]))
-
-        m = 4 * n
-        arrays = [nu, y, cmd, dist, par, np.zeros((num, n, n)), np.zeros((num, n, 1)),
-                  np.zeros((num, 7, n)), np.zeros((num, n))] + [np.zeros((num, m))] * 5 + [
-            np.full((num, 3), np.nan), np.zeros((num, n)), np.zeros((num, m)), np.zeros((num, n))]
-        dev = [cuda.to_device(np.ascontiguousarray(x)) for x in arrays]
-        threads = 128
-        blocks = (num + threads - 1) // threads
-        t = time.perf_counter()
-        step[blocks, threads](*dev)
-        cuda.synchronize()
-        out["compile_and_first_s"] = time.perf_counter() - t
-        t = time.perf_counter()
-        reps = 20
-        for _ in range(reps):
-            step[blocks, threads](*dev)
-        cuda.synchronize()
-        dt = (time.perf_counter() - t) / reps
-        out.update(ok=True, ms_per_physics_step=dt * 1e3, chain_steps_per_s=num / dt)
-    except Exception as exc:  # noqa: BLE001 - the probe reports what failed
-        out.update(ok=False, error=f"{type(exc).__name__}: {str(exc)[:600]}",
-                   where=traceback.format_exc(limit=3)[-800:])
-    return out
-
-
 def main(argv=None) -> int:
     from tether_gym_agents.accel.vec_env import BACKENDS
 
@@ -192,7 +136,6 @@ def main(argv=None) -> int:
                    help="TorchTetherVecEnv backends to time (numba: CPU only; numba-cuda: "
                         "CUDA devices only)")
     p.add_argument("--numba", action="store_true")
-    p.add_argument("--numba-cuda", action="store_true")
     p.add_argument("--compile", action="store_true", help="also time the torch.compile'd core")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
@@ -221,13 +164,6 @@ def main(argv=None) -> int:
             row = compiled_rate(num, device, args.steps)
             rows.append(row)
             print(json.dumps(row), flush=True)
-    if args.numba_cuda:
-        for num in args.envs:
-            row = numba_cuda_probe(num)
-            rows.append(row)
-            print(json.dumps(row), flush=True)
-            if not row.get("ok"):
-                break
     if args.out:
         with open(args.out, "w") as fh:
             json.dump({"meta": meta, "rows": rows}, fh, indent=1)
