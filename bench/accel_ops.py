@@ -1,0 +1,173 @@
+"""Torch operations per PPO iteration of ``train.py gpu``: a count of kernel launches.
+
+    python bench/accel_ops.py                        # configs/gpu_ppo.yml, both CPU backends
+    python bench/accel_ops.py --config experiments/issue34/cfg/L.yml --backend numba
+
+On a GPU a small batch costs its kernel launches, not its arithmetic (the eager torch
+step ran in the same 21 ms from 4k to 262k envs on the H200 of 2026-12-04, docs/gpu.md).
+This script counts, on the CPU, the torch operations that would each be one or more
+kernel launches on a GPU, with the learner's own code: it trains a few iterations of the
+config (``train_seeds``, ``--iterations``, 4 by default; the envs and minibatch sizes
+of the config, which change no count) under a ``TorchDispatchMode`` that counts every
+aten operation below autograd (the backward pass's included), leaving out the views,
+which launch nothing (view, reshape, expand, transpose, slicing, detach and their kin).
+It splits them into the rollout (policy, env step, normalisation, GAE, per iteration)
+and the updates (``_update``, per minibatch step, with the optimizer's share apart:
+the CPU's Adam steps each parameter tensor in turn, where ``train.py gpu`` asks CUDA for
+torch's fused Adam, a kernel or two for all of them), and prints one JSON line per
+backend.
+
+The numba backend's env step is one numba call on the CPU and one kernel launch with
+numba-cuda; the torch operations around it (copies into its rows, resets, autoreset)
+are counted, the numba call is not. A count is a property of the code, not of the
+machine: the same on any CPU, and a lower bound of the GPU's launches (a fused or
+library kernel may launch more than one). What a launch costs on a GPU is not measured
+here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from collections import Counter
+from pathlib import Path
+
+import torch
+from torch.utils._python_dispatch import TorchDispatchMode
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+VIEWS = {"view", "_unsafe_view", "reshape", "expand", "t", "transpose", "permute", "slice",
+         "select", "unsqueeze", "squeeze", "detach", "alias", "as_strided", "lift_fresh",
+         "_reshape_alias", "unbind", "split", "split_with_sizes", "numpy_T", "diagonal",
+         "view_as", "unfold"}
+"""aten operations that make a view and launch nothing."""
+
+
+class Count(TorchDispatchMode):
+    """Counts the aten operations dispatched, by (phase, name), views left out."""
+
+    def __init__(self):
+        super().__init__()
+        self.phase = "rollout"
+        self.ops: Counter = Counter()
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        name = func.overloadpacket.__name__
+        if name not in VIEWS:
+            self.ops[self.phase, name] += 1
+        return func(*args, **(kwargs or {}))
+
+    def by_phase(self) -> Counter:
+        """Operations per phase."""
+        out: Counter = Counter()
+        for (phase, _), n in self.ops.items():
+            out[phase] += n
+        return out
+
+
+def _in_phase(counter: Count, phase: str, fn):
+    """``fn`` with its operations counted under ``phase``."""
+    def wrapped(*args, **kwargs):
+        before, counter.phase = counter.phase, phase
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            counter.phase = before
+    return wrapped
+
+
+def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, int]:
+    """The operations of one whole ``train_seeds`` call, and its minibatch steps.
+
+    Phases: ``update`` (``_update`` less the optimizer), ``adam`` (``Adam.step``),
+    ``env`` (``TorchTetherVecEnv.step``), ``once`` (the checkpoint's files) and
+    ``rollout`` (all else: the start, the policy and normalisation of the rollouts,
+    their GAE). The final check on the training distribution is no part of an
+    iteration and is not run (its figures are written as None).
+    """
+    from tether_gym_agents.accel import trainer
+    from tether_gym_agents.accel.trainer import GpuRun, train_seeds
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    counter = Count()
+    minibatches = [0]
+    real = (trainer._update, trainer._write_agents, trainer.evaluate_on_device,
+            torch.optim.Adam.step, TorchTetherVecEnv.step)
+
+    def adam_step(self, *args, **kwargs):
+        minibatches[0] += 1
+        return _in_phase(counter, "adam", real[3])(self, *args, **kwargs)
+
+    trainer._update = _in_phase(counter, "update", real[0])
+    trainer._write_agents = _in_phase(counter, "once", real[1])
+    trainer.evaluate_on_device = lambda policy, *args, **kwargs: {
+        k: [None] * len(policy.seeds) for k in ("mean_return", "survived", "tracking_rms")}
+    torch.optim.Adam.step = adam_step
+    TorchTetherVecEnv.step = _in_phase(counter, "env", real[4])
+    try:
+        with tempfile.TemporaryDirectory() as out, counter:
+            run = GpuRun([0], iterations * settings.n_steps * settings.n_envs, env_kwargs,
+                         Path(out), torch.device("cpu"), checkpoints=1, eval_episodes=1,
+                         backend=backend)
+            train_seeds(settings, run, log=None)
+    finally:
+        (trainer._update, trainer._write_agents, trainer.evaluate_on_device,
+         torch.optim.Adam.step, TorchTetherVecEnv.step) = real
+    return counter, minibatches[0]
+
+
+def count(config: Path, backend: str, iterations: int) -> dict:
+    """Operations per rollout step and per minibatch step, from two runs' difference.
+
+    A run of ``iterations`` iterations and one of twice as many: the difference of their
+    counts is ``iterations`` iterations' operations, without the start (env, policy,
+    reset), which both runs make once.
+    """
+    from tether_gym_agents.accel.cli import read_config
+
+    settings, _, env_kwargs = read_config(config)[:3]
+    one, mb_one = _run(settings, env_kwargs, backend, iterations)
+    two, mb_two = _run(settings, env_kwargs, backend, 2 * iterations)
+    per_iteration = two.ops.copy()
+    per_iteration.subtract(one.ops)
+    phases = two.by_phase()
+    phases.subtract(one.by_phase())
+    minibatches = (mb_two - mb_one) // iterations            # per iteration
+    per_env = phases["env"] / (iterations * settings.n_steps)
+    per_step = phases["rollout"] / (iterations * settings.n_steps) + per_env
+    per_update = phases["update"] / (iterations * minibatches)
+    per_adam = phases["adam"] / (iterations * minibatches)
+    in_rollout = per_step * settings.n_steps
+    in_updates = (per_update + per_adam) * minibatches
+    top = Counter({k: v // iterations for k, v in per_iteration.items() if v > 0})
+    return {"config": str(config), "backend": backend, "iterations": iterations,
+            "n_steps": settings.n_steps, "minibatches_per_iteration": minibatches,
+            "ops_per_rollout_step": round(per_step, 1),
+            "of_which_env_step": round(per_env, 1),
+            "ops_per_minibatch_step": round(per_update + per_adam, 1),
+            "of_which_adam": round(per_adam, 1),
+            "ops_per_iteration": round(in_rollout + in_updates),
+            "rollout_share": round(in_rollout / (in_rollout + in_updates), 3),
+            "per_iteration_most_frequent": [[f"{ph}:{name}", n]
+                                            for (ph, name), n in top.most_common(10)]}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--config", type=Path, default=ROOT / "agents/configs/gpu_ppo.yml")
+    p.add_argument("--backend", nargs="+", default=["torch", "numba"],
+                   choices=["torch", "numba"])
+    p.add_argument("--iterations", type=int, default=4)
+    args = p.parse_args(argv)
+    torch.set_num_threads(1)
+    for backend in args.backend:
+        print(json.dumps(count(args.config, backend, args.iterations)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

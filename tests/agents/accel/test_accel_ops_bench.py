@@ -1,0 +1,63 @@
+"""bench/accel_ops.py: its count of torch operations per PPO iteration is sound."""
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[3]
+
+TINY = """tether_gym/TetherLibration-v2:
+  n_envs: 8
+  n_steps: 16
+  batch_size: 48
+  n_epochs: 3
+  n_timesteps: 1000
+"""
+
+
+@pytest.fixture(scope="module")
+def accel_ops():
+    spec = importlib.util.spec_from_file_location("accel_ops", ROOT / "bench" / "accel_ops.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cfg") / "tiny.yml"
+    path.write_text(TINY)
+    return path
+
+
+@pytest.fixture(scope="module")
+def counts(accel_ops, tiny):
+    """(backend, iterations) -> the script's figures for the tiny config."""
+    return {key: accel_ops.count(tiny, *key) for key in
+            (("numba", 1), ("numba", 2), ("torch", 1))}
+
+
+def test_counts_are_per_iteration_and_add_up(counts):
+    """Two budgets give the same counts per iteration (no episode ends in 32 steps from
+    the training start), the minibatch steps are epochs x ceil(samples / batch), and
+    an iteration is its rollout steps plus its minibatch steps."""
+    one, two = counts["numba", 1], counts["numba", 2]
+    for key in ("ops_per_rollout_step", "of_which_env_step", "ops_per_minibatch_step",
+                "of_which_adam", "ops_per_iteration"):
+        assert one[key] == two[key], key
+    assert one["minibatches_per_iteration"] == 3 * -(-8 * 16 // 48) == 9
+    total = (16 * one["ops_per_rollout_step"]
+             + 9 * one["ops_per_minibatch_step"])
+    assert abs(one["ops_per_iteration"] - total) <= 1
+    # the CPU's Adam: the same handful of operations for each of the 13 parameter tensors
+    assert one["of_which_adam"] % 13 == 0 and one["of_which_adam"] > 0
+
+
+def test_the_numba_backends_step_is_a_few_torch_operations(counts):
+    """The torch port's step is a thousand-odd operations; the numba backend's, the
+    copies around one numba call."""
+    torch_port, numba = counts["torch", 1], counts["numba", 1]
+    assert torch_port["of_which_env_step"] > 1000
+    assert numba["of_which_env_step"] < torch_port["of_which_env_step"] / 10
+    assert numba["ops_per_minibatch_step"] == torch_port["ops_per_minibatch_step"]
