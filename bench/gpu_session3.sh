@@ -15,6 +15,12 @@
 #   5. ten seeds of J in one process, 150 s, on the numba-cuda backend if step 4 wrote
 #      its run, else on the torch backend: the GPU-trained candidate for the `ppo_accel`
 #      row, which ships J trained on the CPU (docs/gpu.md).
+#   Steps 4-5 also time an iteration (128 x 64 = 8,192 env steps per seed): env steps per
+#   seed / 8,192 / wall time. bench/accel_ops.py counts about 36k torch operations per
+#   iteration on the numba-cuda backend; at the eager torch step's rate on the H200 of
+#   2026-12-04 (about 15 us per operation) that is about 0.5 s, so 50 s buy about 100 of
+#   J's 1,343 iterations (bench/README.md): the time per iteration, not the scores, is
+#   what these runs can tell.
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
 #   configs/gpu_ppo.yml) is left for a session with time to spare.
