@@ -163,6 +163,10 @@ def main(argv=None) -> int:
                    choices=["torch", "numba"])
     p.add_argument("--iterations", type=int, default=4)
     args = p.parse_args(argv)
+    if args.iterations < 1:
+        p.error(f"--iterations must be >= 1, got {args.iterations}")
+    if not args.config.is_file():
+        p.error(f"--config {str(args.config)!r} is not a file")
     torch.set_num_threads(1)
     for backend in args.backend:
         print(json.dumps(count(args.config, backend, args.iterations)), flush=True)
