@@ -84,10 +84,10 @@ def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, in
     """The operations of one whole ``train_seeds`` call, and its minibatch steps.
 
     Phases: ``update`` (``_update`` less the optimizer), ``adam`` (``Adam.step``),
-    ``env`` (``TorchTetherVecEnv.step``), ``once`` (the checkpoint's files) and
-    ``rollout`` (all else: the start, the policy and normalisation of the rollouts,
-    their GAE). The final check on the training distribution is no part of an
-    iteration and is not run (its figures are written as None).
+    ``env`` (``TorchTetherVecEnv.step``) and ``rollout`` (all else: the start, the
+    policy and normalisation of the rollouts, their GAE, the one checkpoint's files).
+    The final check on the training distribution is no part of an iteration and is
+    not run (``train_info.json`` gets no figures of it).
     """
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
@@ -95,19 +95,18 @@ def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, in
 
     counter = Count()
     minibatches = [0]
-    real = (trainer._update, trainer._write_agents, trainer.evaluate_on_device,
-            torch.optim.Adam.step, TorchTetherVecEnv.step)
+    real = (trainer._update, trainer.evaluate_on_device, torch.optim.Adam.step,
+            TorchTetherVecEnv.step)
+    adam = _in_phase(counter, "adam", real[2])
 
     def adam_step(self, *args, **kwargs):
         minibatches[0] += 1
-        return _in_phase(counter, "adam", real[3])(self, *args, **kwargs)
+        return adam(self, *args, **kwargs)
 
     trainer._update = _in_phase(counter, "update", real[0])
-    trainer._write_agents = _in_phase(counter, "once", real[1])
-    trainer.evaluate_on_device = lambda policy, *args, **kwargs: {
-        k: [None] * len(policy.seeds) for k in ("mean_return", "survived", "tracking_rms")}
+    trainer.evaluate_on_device = lambda *args, **kwargs: {}
     torch.optim.Adam.step = adam_step
-    TorchTetherVecEnv.step = _in_phase(counter, "env", real[4])
+    TorchTetherVecEnv.step = _in_phase(counter, "env", real[3])
     try:
         with tempfile.TemporaryDirectory() as out, counter:
             run = GpuRun([0], iterations * settings.n_steps * settings.n_envs, env_kwargs,
@@ -115,8 +114,8 @@ def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, in
                          backend=backend)
             train_seeds(settings, run, log=None)
     finally:
-        (trainer._update, trainer._write_agents, trainer.evaluate_on_device,
-         torch.optim.Adam.step, TorchTetherVecEnv.step) = real
+        (trainer._update, trainer.evaluate_on_device, torch.optim.Adam.step,
+         TorchTetherVecEnv.step) = real
     return counter, minibatches[0]
 
 
@@ -125,7 +124,7 @@ def count(config: Path, backend: str, iterations: int) -> dict:
 
     A run of ``iterations`` iterations and one of twice as many: the difference of their
     counts is ``iterations`` iterations' operations, without the start (env, policy,
-    reset), which both runs make once.
+    reset) and the checkpoint's files, which both runs make once.
     """
     from tether_gym_agents.accel.cli import read_config
 
