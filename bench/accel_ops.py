@@ -15,7 +15,9 @@ It splits them into the rollout (policy, env step, normalisation, GAE, per itera
 and the updates (``_update``, per minibatch step, with the optimizer's share apart:
 the CPU's Adam steps each parameter tensor in turn, where ``train.py gpu`` asks CUDA for
 torch's fused Adam, a kernel or two for all of them), and prints one JSON line per
-backend.
+backend. It also counts the host syncs (reads of a tensor's value back to the host) per
+rollout step and per minibatch step, the optimizer's left out (the CPU's Adam reads its
+step counter; CUDA's fused one does not): a CUDA graph can hold none.
 
 The numba backend's env step is one numba call on the CPU and one kernel launch with
 numba-cuda; the torch operations around it (copies into its rows, resets, autoreset)
@@ -43,8 +45,12 @@ sys.path.insert(0, str(ROOT))
 VIEWS = {"view", "_unsafe_view", "reshape", "expand", "t", "transpose", "permute", "slice",
          "select", "unsqueeze", "squeeze", "detach", "alias", "as_strided", "lift_fresh",
          "_reshape_alias", "unbind", "split", "split_with_sizes", "numpy_T", "diagonal",
-         "view_as", "unfold"}
-"""aten operations that make a view and launch nothing."""
+         "view_as", "unfold", "_record_function_enter_new", "_record_function_exit"}
+"""aten operations that launch nothing: views, and the profiler's markers."""
+SYNC = "_local_scalar_dense"
+"""The aten operation that reads a tensor's value back to the host (``.item()``, ``if t``,
+``.tolist()``): on a GPU, a wait for every kernel queued before it, and no CUDA graph
+can hold it."""
 
 
 class Count(TorchDispatchMode):
@@ -151,6 +157,11 @@ def count(config: Path, backend: str, iterations: int) -> dict:
             "of_which_adam": round(per_adam, 1),
             "ops_per_iteration": round(in_rollout + in_updates),
             "rollout_share": round(in_rollout / (in_rollout + in_updates), 3),
+            "host_syncs_per_rollout_step": round(
+                (per_iteration["rollout", SYNC] + per_iteration["env", SYNC])
+                / (iterations * settings.n_steps), 2),
+            "host_syncs_per_minibatch_step": round(
+                per_iteration["update", SYNC] / (iterations * minibatches), 2),
             "per_iteration_most_frequent": [[f"{ph}:{name}", n]
                                             for (ph, name), n in top.most_common(10)]}
 

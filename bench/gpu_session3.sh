@@ -1,33 +1,38 @@
 #!/usr/bin/env bash
-# The next device session of issue 34 (prepared; about 9 minutes; no device was lent to the
-# session that wrote it): the numba-cuda backend (the numba env's own step compiled for
+# The next device session of issue 34 (prepared; about 10 minutes; no device was lent to
+# the sessions that wrote it): the numba-cuda backend (the numba env's own step compiled for
 # the GPU) against the torch port, on the GPU.
 #   1. numba-cuda compiles the step for the device (bench/numba_cuda_ptx.py);
 #   2. the equality tests with each backend on the GPU (one step at 1e-12, whole episodes
 #      at 1e-9, starts, autoreset), failures with their size;
 #   3. env throughput at 65,536 and 1,048,576 envs: torch eager, numba-cuda, and the
 #      torch.compile'd core (bench/gpu_throughput.py);
-#   4. one seed of J (cfg/J.yml: ppo_fast's 64-step rollouts, 80 gradient steps and 1,343
+#   4. the CUDA graph of the minibatch step (agents/accel/graphs.py, written 2026-12-07
+#      without a device): its tests on the GPU, where the capture itself runs;
+#   5. one seed of J (cfg/J.yml: ppo_fast's 64-step rollouts, 80 gradient steps and 1,343
 #      iterations with twice its envs and minibatch; on the CPU it tracks at half
-#      ppo_fast's error in 11M env steps, where D and E, with 16-step rollouts and 245
-#      iterations, stop at 0.02 rad: experiments/issue34/README.md) on the numba-cuda
-#      backend, 50 s of training (the learning rate falls to 0 at the time budget);
-#   5. ten seeds of J in one process, 150 s, on the numba-cuda backend if step 4 wrote
-#      its run, else on the torch backend: the GPU-trained candidate for the `ppo_accel`
-#      row, which ships J trained on the CPU (docs/gpu.md).
-#   Steps 4-5 also time an iteration (128 x 64 = 8,192 env steps per seed): env steps per
-#   seed / 8,192 / wall time. bench/accel_ops.py counts about 36k torch operations per
-#   iteration on the numba-cuda backend; at the eager torch step's rate on the H200 of
-#   2026-12-04 (about 15 us per operation) that is about 0.5 s, so 50 s buy about 100 of
-#   J's 1,343 iterations (bench/README.md): the time per iteration, not the scores, is
-#   what these runs can tell.
+#      ppo_fast's error in 11M env steps: experiments/issue34/README.md) on the
+#      numba-cuda backend, 40 s of training (the learning rate falls to 0 at the time
+#      budget), eager, then the same with --cuda-graphs;
+#   6. ten seeds of J in one process, 150 s, with --cuda-graphs if step 5 wrote its
+#      graphed run (else eager), on the numba-cuda backend if step 5 wrote its eager run,
+#      else on the torch backend: the GPU-trained candidate for the `ppo_accel` row,
+#      which ships J trained on the CPU (docs/gpu.md).
+#   Steps 5-6 time an iteration (128 x 64 = 8,192 env steps per seed): env steps per
+#   seed / 8,192 / wall time, from the checkpoint lines of the logs. bench/accel_ops.py
+#   counts about 64 x 230 + 80 x 250 = 35k torch operations per eager iteration on the
+#   numba-cuda backend; at the eager torch step's rate on the H200 of 2026-12-04 (about
+#   15 us per operation) that is about 0.5 s, so 40 s buy about 80 of J's 1,343
+#   iterations. With the minibatch step graphed, its 80 x 250 launches become 80
+#   replays: the time per iteration with and without graphs, not the scores, is what
+#   these runs can tell (bench/README.md).
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
 #   configs/gpu_ppo.yml) is left for a session with time to spare.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
-#   bash bench/gpu_session3.sh train       # steps 4-5 (at most 280 s; about 4 minutes)
+#   bash bench/gpu_session3.sh train       # steps 4-6 (at most 440 s; about 5 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -48,16 +53,24 @@ timeout 200 python3 bench/gpu_throughput.py --device cuda --envs 65536 1048576 -
     --backend torch numba-cuda --compile --out $OUT/bench3.json
 fi
 if [ "$PART" = train ]; then
-echo "== 4. one seed of J, numba-cuda backend"
-t=$(date +%s.%N)
-timeout 90 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 \
-    --backend numba-cuda --max-seconds 50 --device cuda --out runs_gpu/single_J_numba_cuda
-echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
+echo "== 4. the CUDA graph of the minibatch step"
+timeout 100 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
+    2>&1 | grep -E "FAILED|passed|failed|skipped|^E .*Error"
+for graphs in "" --cuda-graphs; do
+  echo "== 5. one seed of J, numba-cuda backend ${graphs:-eager}"
+  t=$(date +%s.%N)
+  timeout 70 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 $graphs \
+      --backend numba-cuda --max-seconds 40 --device cuda \
+      --out runs_gpu/single_J_numba_cuda${graphs:+_graphs}
+  echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
+done
 backend=torch
 [ -f runs_gpu/single_J_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
-echo "== 5. ten seeds of J, backend $backend"
+graphs=
+[ -f runs_gpu/single_J_numba_cuda_graphs/seed_0/agent.json ] && graphs=--cuda-graphs
+echo "== 6. ten seeds of J, backend $backend ${graphs:-eager}"
 t=$(date +%s.%N)
-timeout 190 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 10 \
+timeout 190 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 10 $graphs \
     --backend $backend --max-seconds 150 --device cuda --out runs_gpu/ten_J
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3.tar.gz runs_gpu

@@ -5,6 +5,8 @@
 * :mod:`.vec_env`: :class:`~.vec_env.TorchTetherVecEnv`, thousands of envs on one device;
 * :mod:`.ppo`: PPO with several seeds trained at once on the device, writing standard
   agent folders that ``evaluate.py`` scores on the numba env;
+* :mod:`.graphs`: PPO's minibatch step captured as a CUDA graph and replayed
+  (``--cuda-graphs``);
 * :mod:`.cli`: ``python train.py gpu ...``.
 
 Needs torch (``pip install -e ".[gpu]"`` on a CUDA machine; the CPU build works too).

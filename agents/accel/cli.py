@@ -136,6 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="the env's step: torch (default: torch operations), numba (the numba "
                         "env's own row step, CPU) or numba-cuda (that row step compiled for "
                         "the GPU); docs/gpu.md")
+    p.add_argument("--cuda-graphs", action="store_true",
+                   help="capture the minibatch step as a CUDA graph and replay it (CUDA "
+                        "devices only; not yet measured on a GPU: docs/gpu.md)")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -178,6 +181,10 @@ def main(argv=None, clock_start: float | None = None) -> int:
                        _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
         device = resolve_device(args.device)
         check_backend(args.backend, device, compile=args.compile)
+        if args.cuda_graphs and device.type != "cuda":
+            raise GpuConfigError(f"--cuda-graphs needs a CUDA device (--device cuda or "
+                                 f"auto on a GPU machine), got --device {args.device!r} "
+                                 f"-> {device}")
     except (ValueError, ImportError) as exc:
         print(f"train.py gpu: error: {exc}", file=sys.stderr)
         return 2
@@ -188,7 +195,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
     summary = train_seeds(settings, GpuRun(seeds, steps, env_kwargs, args.out, device,
                                            checkpoints=checkpoints, command=command,
                                            clock_start=start, max_seconds=max_seconds,
-                                           compile=args.compile, backend=args.backend))
+                                           compile=args.compile, backend=args.backend,
+                                           cuda_graphs=args.cuda_graphs))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

@@ -32,6 +32,7 @@ from ..files.run_folder import (
     write_train_info,
 )
 from ..files.safe_format import ObsNormalization, save_agent
+from .graphs import GraphedMinibatchStep
 from .ppo import MultiSeedPolicy, PPOSettings, RunningStats, learning_rate_at
 from .vec_env import TorchTetherVecEnv
 
@@ -91,7 +92,9 @@ class GpuRun:
     ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
     ``compile``: the env's step through ``torch.compile``; ``backend``: the env's step
-    backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend).
+    backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend);
+    ``cuda_graphs``: the minibatch step captured as a CUDA graph and replayed
+    (:class:`~.graphs.GraphedMinibatchStep`, CUDA devices only).
     """
 
     seeds: list[int]
@@ -106,6 +109,7 @@ class GpuRun:
     eval_episodes: int = 64
     compile: bool = False
     backend: str = "torch"
+    cuda_graphs: bool = False
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -126,10 +130,10 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                             compile=run.compile, backend=run.backend, **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
-    # lr 1: each seed's step size scales its gradient instead (see _update), so that the
+    # lr 1: each seed's rate scales its Adam step instead (see _minibatch_step), so that the
     # seeds of one optimizer can have their own (adaptive) learning rates
     opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5,
-                           fused=device.type == "cuda")
+                           fused=device.type == "cuda", capturable=run.cuda_graphs)
     obs_stats = RunningStats(S, d, device)
     ret_stats = RunningStats(S, 1, device)
     returns = torch.zeros((S, N), dtype=torch.float64, device=device)
@@ -154,6 +158,9 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     buf_val = torch.zeros((T, S, N), device=device)
     buf_rew = torch.zeros((T, S, N), device=device)
     buf_start = torch.zeros((T, S, N), device=device)
+    batch = RolloutBatch(T, S, N, d, a, device)
+    minibatch_step = (GraphedMinibatchStep(_minibatch_step) if run.cuda_graphs
+                      else _minibatch_step)
     ep_ret = torch.zeros((S, N), dtype=torch.float64, device=device)
     done_eps = torch.zeros(S, device=device)
     done_fail = torch.zeros(S, device=device)
@@ -212,7 +219,8 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                 adv[t] = gae
             ret = adv + buf_val
         steps += per_rollout
-        _update(policy, opt, lr, settings, buf_obs, buf_act, buf_logp, adv, ret)
+        batch.fill(buf_obs, buf_act, buf_logp, adv, ret)
+        _update(policy, opt, lr, settings, batch, minibatch_step)
         out_of_time = time.perf_counter() - t0 > max_seconds
         if update in marks or out_of_time:
             wall = time.perf_counter() - t0
@@ -321,44 +329,89 @@ def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     return torch.gather(x, 1, idx.view(S, -1, *([1] * (x.dim() - 2))).expand(-1, -1, *x.shape[2:]))
 
 
-def _update(policy, opt, lr, settings: PPOSettings, obs, act, old_logp, adv, ret) -> None:
-    """``n_epochs`` passes of clipped-surrogate minibatch updates, per seed independent.
+def _permutations(epochs: int, S: int, M: int, device) -> torch.Tensor:
+    """Each epoch's minibatch order per seed (epochs, S, M), drawn before the minibatch steps.
 
-    Adam runs with lr 1 and each seed's step is scaled by its own rate ``lr`` (S,)
-    afterwards: Adam's step is linear in lr, so this is Adam with a per-seed rate.
+    One ``argsort(rand)`` per epoch, in epoch order: the same draws as one per epoch
+    between the steps (the steps draw nothing), and no sort inside a captured CUDA graph.
     """
-    T, S, N, d = obs.shape
-    M = T * N
-    def flat(x):
-        return (x.transpose(0, 1).reshape(S, M, *x.shape[3:]))
-    obs, act, old_logp, adv, ret = flat(obs), flat(act), flat(old_logp), flat(adv), flat(ret)
-    bs = min(settings.batch_size, M)
+    return torch.stack([torch.argsort(torch.rand((S, M), device=device), dim=1)
+                        for _ in range(epochs)])
+
+
+class RolloutBatch:
+    """One iteration's samples per seed, flattened (S, T N, ...), in tensors kept for the run.
+
+    The minibatch steps read them where they are: a captured CUDA graph
+    (:class:`~.graphs.GraphedMinibatchStep`) reads them again at every replay, so
+    :meth:`fill` writes each rollout into the same storage.
+    """
+
+    def __init__(self, T: int, S: int, N: int, d: int, a: int, device):
+        M = T * N
+        self.T, self.N = T, N
+        self.obs = torch.zeros((S, M, d), device=device)
+        self.act = torch.zeros((S, M, a), device=device)
+        self.logp = torch.zeros((S, M), device=device)
+        self.adv = torch.zeros((S, M), device=device)
+        self.ret = torch.zeros((S, M), device=device)
+
+    def tensors(self) -> tuple[torch.Tensor, ...]:
+        """(obs, act, old log-prob, advantage, return), as the minibatch step takes them."""
+        return self.obs, self.act, self.logp, self.adv, self.ret
+
+    def fill(self, obs, act, old_logp, adv, ret) -> None:
+        """Copy a rollout's buffers (T, S, N, ...) in, seed-major, (time, env) order."""
+        for dst, src in zip(self.tensors(), (obs, act, old_logp, adv, ret), strict=True):
+            S = src.shape[1]
+            dst.view(S, self.T, self.N, *src.shape[3:]).copy_(src.transpose(0, 1))
+
+
+def _minibatch_step(policy, opt, lr, settings: PPOSettings, batch: tuple, idx) -> None:
+    """One clipped-surrogate update of every seed on its samples ``idx`` (S, b) of ``batch``.
+
+    Free of host syncs and random draws, with fixed shapes, so that a CUDA graph can
+    capture it (:mod:`.graphs`). Adam runs with lr 1 and each seed's step is scaled by its
+    own rate ``lr`` (S,) afterwards: Adam's step is linear in lr, so this is Adam with a
+    per-seed rate.
+    """
     params = list(policy.parameters())
-    for _ in range(settings.n_epochs):
-        perm = torch.argsort(torch.rand((S, M), device=obs.device), dim=1)
+    o, ac, lp0, ad, rt = (_take(x, idx) for x in batch)
+    ad = (ad - ad.mean(dim=1, keepdim=True)) / (ad.std(dim=1, keepdim=True) + 1e-8)
+    dist = policy.distribution(o)
+    lp = dist.log_prob(ac).sum(-1)
+    ratio = torch.exp(lp - lp0)
+    pg = -torch.minimum(ad * ratio, ad * torch.clamp(ratio, 1.0 - settings.clip_range,
+                                                    1.0 + settings.clip_range)).mean(1)
+    vf = (rt - policy.value(o)).square().mean(1)
+    ent = -dist.entropy().sum(-1).mean(1)
+    loss = (pg + settings.ent_coef * ent + settings.vf_coef * vf).sum()
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    policy.per_seed_grad_clip(settings.max_grad_norm)
+    before = [p.detach().clone() for p in params]
+    opt.step()
+    with torch.no_grad():
+        for p, b in zip(params, before, strict=True):
+            p.copy_(b + (p - b) * lr.view(-1, *([1] * (p.dim() - 1))))
+    if settings.lr_schedule == "adaptive":
+        with torch.no_grad():  # rsl_rl's rule on the KL of the rollout policy
+            kl = (lp0 - lp).mean(1)
+            lr.copy_(torch.where(kl > 2.0 * settings.desired_kl, lr / 1.5,
+                                 torch.where(kl < 0.5 * settings.desired_kl, lr * 1.5,
+                                             lr)).clamp(1e-5, 1e-2))
+
+
+def _update(policy, opt, lr, settings: PPOSettings, batch: RolloutBatch,
+            step=_minibatch_step) -> None:
+    """``n_epochs`` passes of minibatch steps over ``batch``, per seed independent.
+
+    ``step`` is :func:`_minibatch_step` or its captured CUDA graph
+    (:class:`~.graphs.GraphedMinibatchStep`, same arguments).
+    """
+    S, M = batch.logp.shape
+    bs = min(settings.batch_size, M)
+    perms = _permutations(settings.n_epochs, S, M, batch.logp.device)
+    for epoch in range(settings.n_epochs):
         for start in range(0, M, bs):
-            idx = perm[:, start:start + bs]
-            o, ac, lp0, ad, rt = (_take(x, idx) for x in (obs, act, old_logp, adv, ret))
-            ad = (ad - ad.mean(dim=1, keepdim=True)) / (ad.std(dim=1, keepdim=True) + 1e-8)
-            dist = policy.distribution(o)
-            lp = dist.log_prob(ac).sum(-1)
-            ratio = torch.exp(lp - lp0)
-            pg = -torch.minimum(ad * ratio, ad * torch.clamp(ratio, 1.0 - settings.clip_range,
-                                                            1.0 + settings.clip_range)).mean(1)
-            vf = (rt - policy.value(o)).square().mean(1)
-            ent = -dist.entropy().sum(-1).mean(1)
-            loss = (pg + settings.ent_coef * ent + settings.vf_coef * vf).sum()
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            policy.per_seed_grad_clip(settings.max_grad_norm)
-            before = [p.detach().clone() for p in params]
-            opt.step()
-            with torch.no_grad():
-                for p, b in zip(params, before, strict=True):
-                    p.copy_(b + (p - b) * lr.view(-1, *([1] * (p.dim() - 1))))
-            if settings.lr_schedule == "adaptive":
-                with torch.no_grad():  # rsl_rl's rule on the KL of the rollout policy
-                    kl = (lp0 - lp).mean(1)
-                    lr.copy_(torch.where(kl > 2.0 * settings.desired_kl, lr / 1.5,
-                                         torch.where(kl < 0.5 * settings.desired_kl, lr * 1.5,
-                                                     lr)).clamp(1e-5, 1e-2))
+            step(policy, opt, lr, settings, batch.tensors(), perms[epoch, :, start:start + bs])

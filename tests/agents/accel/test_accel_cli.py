@@ -72,6 +72,7 @@ def test_cuda_without_a_gpu_is_a_clear_error(tmp_path, capsys):
     (["--backend", "numba", "--compile"], "compile=True must be False"),
     (["--backend", "numba-cuda", "--compile"], "compile=True must be False"),
     (["--backend", "numba-cuda"], "needs a CUDA device, got device='cpu'"),
+    (["--cuda-graphs"], "--cuda-graphs needs a CUDA device"),
 ])
 def test_bad_backend_is_one_line_before_any_work(tmp_path, capsys, extra, message):
     code = train_main(["gpu", "--device", "cpu", "--out", str(tmp_path / "o"), *extra])

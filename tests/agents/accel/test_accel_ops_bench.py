@@ -53,6 +53,10 @@ def test_counts_are_per_iteration_and_add_up(counts):
     # the CPU's Adam steps each of the 13 parameter tensors in turn: several operations
     # each (9 in a fresh process; what torch has loaded before can add a couple)
     assert 13 <= one["of_which_adam"] < one["ops_per_minibatch_step"]
+    # the minibatch step reads nothing back to the host (what a CUDA graph needs,
+    # agents/accel/graphs.py); a rollout step does, in the env's autoreset
+    assert one["host_syncs_per_minibatch_step"] == 0
+    assert one["host_syncs_per_rollout_step"] > 0
 
 
 def test_the_numba_backends_step_is_a_few_torch_operations(counts):
