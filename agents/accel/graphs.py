@@ -20,8 +20,10 @@ The warm-up steps are ordinary training steps. Nothing is run twice, and nothing
 left out.
 
 Not yet measured on a GPU. No device was lent to the session that wrote this
-(2026-12-07). Its CPU tests replay the step through :class:`CallCapture`, which
-checks how the inputs are fed, not CUDA's capture itself. Step 4 of
+(2026-12-07). Its CPU tests capture and replay the step through
+:class:`RecordingCapture`, which keeps a CUDA graph's rules on the CPU (the recorded
+operations replayed on the recorded tensors, the Python not run again), not CUDA's
+capture itself. Step 4 of
 ``bench/gpu_session3.sh`` runs it on a device.
 """
 
@@ -30,8 +32,9 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import torch
+from torch.utils._python_dispatch import TorchDispatchMode
 
-__all__ = ["GraphedMinibatchStep", "CudaCapture", "CallCapture"]
+__all__ = ["GraphedMinibatchStep", "CudaCapture", "RecordingCapture"]
 
 WARMUP_STEPS = 3
 """Eager steps of each minibatch shape before its capture (make_graphed_callables' 3)."""
@@ -60,12 +63,17 @@ class CudaCapture:
         return graph.replay
 
 
-class CallCapture:
-    """A stand-in for :class:`CudaCapture` on any device.
+class RecordingCapture:
+    """CUDA-graph semantics on any device: a stand-in for :class:`CudaCapture` in the tests.
 
-    Like a capture, :meth:`capture` runs nothing, and each replay runs ``fn`` again on
-    the inputs fixed at capture. The tests use it to check on the CPU that the step is
-    fed through its fixed inputs: the step is then equal to the eager step.
+    :meth:`capture` runs ``fn`` once under a dispatch mode that records every aten
+    operation (the backward pass and the optimizer's included) with the very tensors it
+    read and wrote. It then puts back every tensor that existed before and that ``fn``
+    wrote, and the CPU generator's state, so that, like a capture, it leaves the state as
+    it found it. Each replay runs the recorded operations again on the same tensors,
+    without running ``fn``'s Python again: a Python number, or a tensor that Python
+    rebinds after the capture, stays as the capture saw it, as in a CUDA graph. A host
+    sync during the capture raises RuntimeError, as CUDA's capture does.
     """
 
     def warmup(self, fn: Callable[[], None]) -> None:
@@ -73,8 +81,77 @@ class CallCapture:
         fn()
 
     def capture(self, fn: Callable[[], None]) -> Callable[[], None]:
-        """``fn`` itself, not run: its calls are the replays."""
-        return fn
+        """Record ``fn``'s operations, undo its writes; the replay of the record."""
+        rng = torch.get_rng_state()
+        recorder = _Recorder()
+        try:
+            with recorder:
+                fn()
+        finally:
+            with torch.no_grad():
+                for tensor, saved in recorder.saved.values():
+                    tensor.copy_(saved)
+            torch.set_rng_state(rng)
+        return recorder.replay
+
+
+_UNRECORDED = {"_record_function_enter_new", "_record_function_exit"}
+"""Profiler markers: no arithmetic."""
+
+
+def _tensors(value) -> list[torch.Tensor]:
+    """The tensors in an argument or result (a tensor, a list or tuple of them, or none)."""
+    if isinstance(value, torch.Tensor):
+        return [value]
+    if isinstance(value, (list, tuple)):
+        return [v for v in value if isinstance(v, torch.Tensor)]
+    return []
+
+
+class _Recorder(TorchDispatchMode):
+    """Records aten operations for :class:`RecordingCapture` (see there)."""
+
+    def __init__(self):
+        super().__init__()
+        self.ops: list[tuple] = []
+        self.made: set[int] = set()        # storages that the recorded operations made
+        self.saved: dict[tuple, tuple] = {}  # written tensors from before: (tensor, copy)
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        kwargs = kwargs or {}
+        name = func.overloadpacket.__name__
+        if name == "_local_scalar_dense":
+            raise RuntimeError("RecordingCapture: a host sync (a tensor read back to the "
+                               "host) inside a capture")
+        if name in _UNRECORDED:
+            return func(*args, **kwargs)
+        schema = func._schema
+        written = []
+        for i, arg in enumerate(schema.arguments):
+            if arg.alias_info is not None and arg.alias_info.is_write:
+                value = args[i] if i < len(args) else kwargs.get(arg.name)
+                written.extend(_tensors(value))
+        for t in written:
+            if t.untyped_storage().data_ptr() not in self.made:
+                key = (t.untyped_storage().data_ptr(), t.storage_offset(), tuple(t.shape),
+                       t.stride())
+                self.saved.setdefault(key, (t, t.detach().clone()))
+        out = func(*args, **kwargs)
+        if written:
+            self.ops.append((func, args, kwargs, None))
+        elif not any(r.alias_info is not None for r in schema.returns):  # a new tensor
+            self.made.update(t.untyped_storage().data_ptr() for t in _tensors(out))
+            self.ops.append((func, args, kwargs, out))
+        return out  # a view: it aliases recorded storage, nothing to replay
+
+    def replay(self) -> None:
+        """Run the recorded operations again; each new result lands in the recorded one."""
+        with torch.no_grad():
+            for func, args, kwargs, out in self.ops:
+                result = func(*args, **kwargs)
+                if out is not None:
+                    for dst, src in zip(_tensors(out), _tensors(result), strict=True):
+                        dst.copy_(src)
 
 
 def _addresses(batch: tuple, lr: torch.Tensor, opt: torch.optim.Optimizer) -> tuple:
@@ -96,7 +173,7 @@ class GraphedMinibatchStep:
     ----------
     step : callable
         :func:`~.trainer._minibatch_step` (no host sync, no random draw).
-    capture : CudaCapture or CallCapture, optional
+    capture : CudaCapture or RecordingCapture, optional
         The graph API (default: :class:`CudaCapture`).
     """
 

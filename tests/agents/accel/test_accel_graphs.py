@@ -2,8 +2,9 @@
 
 A capture needs a step free of host syncs, random draws and sorts, and fed through
 fixed inputs. The first is counted here with a dispatch mode. The second is checked
-by replaying the step through :class:`CallCapture`: it runs the step again on the
-inputs fixed at capture, and the result must be the eager step's, bitwise. CUDA's
+by capturing and replaying the step through :class:`RecordingCapture`, which replays
+the recorded aten operations on the recorded tensors without running the Python again,
+as a CUDA graph does: the result must be the eager step's, bitwise. CUDA's
 capture itself is run by ``test_a_cuda_graph_trains_what_the_eager_step_trains`` where
 torch sees a GPU, and skipped elsewhere (CI has none).
 """
@@ -20,8 +21,8 @@ from torch.utils._python_dispatch import TorchDispatchMode  # noqa: E402
 
 from tether_gym_agents.accel.graphs import (  # noqa: E402
     WARMUP_STEPS,
-    CallCapture,
     GraphedMinibatchStep,
+    RecordingCapture,
 )
 from tether_gym_agents.accel.ppo import MultiSeedPolicy, PPOSettings  # noqa: E402
 from tether_gym_agents.accel.trainer import (  # noqa: E402
@@ -52,11 +53,14 @@ class _Ops(TorchDispatchMode):
         return func(*args, **(kwargs or {}))
 
 
-def _learner(schedule="linear", seeds=(3, 4), obs_dim=6, act_dim=2):
+def _learner(schedule="linear", seeds=(3, 4), obs_dim=6, act_dim=2, fused=False):
+    """Settings, policy, Adam and rates; ``fused``: the CPU's fused Adam, which keeps its
+    step count on the device as CUDA's capturable Adam does (the default one reads it
+    back to the host)."""
     settings = PPOSettings(n_envs=8, n_steps=4, batch_size=8, n_epochs=2, lr_schedule=schedule,
                            net_arch=(16, 16), log_std_init=-1.0)
     policy = MultiSeedPolicy(list(seeds), obs_dim, act_dim, settings, "cpu")
-    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5)
+    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5, fused=fused)
     lr = torch.full((len(seeds),), 3e-3)
     return settings, policy, opt, lr
 
@@ -121,14 +125,14 @@ def test_permutations_are_one_argsort_of_rand_per_epoch():
                          [(8, "linear", 1), (9, "adaptive", 2)])
 def test_a_replayed_step_is_the_eager_step(N, schedule, graphs):
     """Three iterations of ``_update`` on fresh rollouts: the graphed step (through
-    CallCapture) leaves the weights, Adam's moments and the rates bitwise as the eager
-    step does. With 9 envs x 4 steps the last minibatch of an epoch is 4 rows, not 8:
+    RecordingCapture) leaves the weights, Adam's moments and the rates bitwise as the
+    eager step does. With 9 envs x 4 steps the last minibatch of an epoch is 4 rows, not 8:
     a second graph."""
     T, S, d, a = 4, 2, 6, 2
     results = []
     for graphed in (False, True):
-        settings, policy, opt, lr = _learner(schedule)
-        step = GraphedMinibatchStep(_minibatch_step, CallCapture()) if graphed \
+        settings, policy, opt, lr = _learner(schedule, fused=True)
+        step = GraphedMinibatchStep(_minibatch_step, RecordingCapture()) if graphed \
             else _minibatch_step
         batch = RolloutBatch(T, S, N, d, a, "cpu")
         g = torch.Generator().manual_seed(11)
@@ -148,10 +152,10 @@ def test_a_replayed_step_is_the_eager_step(N, schedule, graphs):
 
 def test_a_replay_whose_inputs_moved_is_refused():
     """A rollout in new storage after the capture would be read stale by a replay."""
-    settings, policy, opt, lr = _learner()
+    settings, policy, opt, lr = _learner(fused=True)
     batch = RolloutBatch(4, 2, 8, 6, 2, "cpu")
     batch.fill(*_rollout(torch.Generator().manual_seed(0), 4, 2, 8, 6, 2))
-    step = GraphedMinibatchStep(_minibatch_step, CallCapture())
+    step = GraphedMinibatchStep(_minibatch_step, RecordingCapture())
     idx = _permutations(1, 2, 32, "cpu")[0, :, :8]
     for _ in range(WARMUP_STEPS + 1):
         step(policy, opt, lr, settings, batch.tensors(), idx)
@@ -159,6 +163,47 @@ def test_a_replay_whose_inputs_moved_is_refused():
     moved = tuple(t.clone() for t in batch.tensors())
     with pytest.raises(RuntimeError, match="moved since the capture"):
         step(policy, opt, lr, settings, moved, idx)
+
+
+def test_the_stand_in_keeps_a_graphs_rules():
+    """RecordingCapture is a CUDA graph's rules, not a second call: its capture changes
+    nothing, a replay reads the tensors the capture read (a tensor that Python rebinds
+    afterwards is not seen; one refilled in place is), Python numbers stay as captured,
+    and a host sync cannot be captured."""
+    state = {"x": torch.ones(3), "k": 2.0}
+    total = torch.zeros(3)
+
+    def fn():
+        total.add_(state["x"] * state["k"])
+
+    replay = RecordingCapture().capture(fn)
+    assert torch.equal(total, torch.zeros(3))       # capturing ran nothing
+    replay()
+    assert torch.equal(total, torch.full((3,), 2.0))
+    state["x"].fill_(5.0)                            # refilled in place: seen
+    state["k"] = 100.0                               # a Python number: fixed at capture
+    replay()
+    assert torch.equal(total, torch.full((3,), 12.0))
+    state["x"] = torch.full((3,), 7.0)               # rebound: the replay reads the old one
+    replay()
+    assert torch.equal(total, torch.full((3,), 22.0))
+    with pytest.raises(RuntimeError, match="host sync"):
+        RecordingCapture().capture(lambda: float(total.sum()))
+
+
+def test_the_cpus_default_adam_cannot_be_captured():
+    """The CPU's default Adam reads its step count back to the host, as CUDA's Adam does
+    without ``capturable=True``: a capture of the step fails, where the trainer's
+    ``--cuda-graphs`` asks for the capturable one."""
+    settings, policy, opt, lr = _learner()
+    batch = RolloutBatch(4, 2, 8, 6, 2, "cpu")
+    batch.fill(*_rollout(torch.Generator().manual_seed(0), 4, 2, 8, 6, 2))
+    step = GraphedMinibatchStep(_minibatch_step, RecordingCapture())
+    idx = _permutations(1, 2, 32, "cpu")[0, :, :8]
+    for _ in range(WARMUP_STEPS):
+        step(policy, opt, lr, settings, batch.tensors(), idx)
+    with pytest.raises(RuntimeError, match="host sync"):
+        step(policy, opt, lr, settings, batch.tensors(), idx)
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
