@@ -2,6 +2,7 @@
 
     python bench/accel_ops.py                        # configs/gpu_ppo.yml, both CPU backends
     python bench/accel_ops.py --config experiments/issue34/cfg/L.yml --backend numba
+    python bench/accel_ops.py --backend numba --cuda-graphs   # what the host launches
 
 On a GPU a small batch costs its kernel launches, not its arithmetic (the eager torch
 step ran in the same 21 ms from 4k to 262k envs on the H200 of 2026-12-04, docs/gpu.md).
@@ -42,6 +43,8 @@ from torch.utils._python_dispatch import TorchDispatchMode
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from tether_gym_agents.accel.graphs import WARMUP_STEPS  # noqa: E402
+
 VIEWS = {"view", "_unsafe_view", "reshape", "expand", "t", "transpose", "permute", "slice",
          "select", "unsqueeze", "squeeze", "detach", "alias", "as_strided", "lift_fresh",
          "_reshape_alias", "unbind", "split", "split_with_sizes", "numpy_T", "diagonal",
@@ -59,11 +62,12 @@ class Count(TorchDispatchMode):
     def __init__(self):
         super().__init__()
         self.phase = "rollout"
+        self.on = True
         self.ops: Counter = Counter()
 
     def __torch_dispatch__(self, func, types, args=(), kwargs=None):
         name = func.overloadpacket.__name__
-        if name not in VIEWS:
+        if self.on and name not in VIEWS:
             self.ops[self.phase, name] += 1
         return func(*args, **(kwargs or {}))
 
@@ -86,7 +90,8 @@ def _in_phase(counter: Count, phase: str, fn):
     return wrapped
 
 
-def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, int]:
+def _run(settings, env_kwargs, backend: str, iterations: int,
+         graphs: bool = False) -> tuple[Count, int]:
     """The operations of one whole ``train_seeds`` call, and its minibatch steps.
 
     Phases: ``update`` (``_update`` less the optimizer), ``adam`` (``Adam.step``),
@@ -94,38 +99,70 @@ def _run(settings, env_kwargs, backend: str, iterations: int) -> tuple[Count, in
     policy and normalisation of the rollouts, their GAE, the one checkpoint's files).
     The final check on the training distribution is no part of an iteration and is
     not run (``train_info.json`` gets no figures of it).
+
+    ``graphs``: ``--cuda-graphs``, its captures kept by ``RecordingCapture`` on the CPU
+    with the CPU's fused Adam (whose step count stays on the device, as with CUDA's
+    capturable Adam). A replay counts as one operation (``graph_replay``): what the host
+    launches; the operations inside it are not counted.
     """
+    from tether_gym_agents.accel import graphs as graph_module
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
     counter = Count()
     minibatches = [0]
-    real = (trainer._update, trainer.evaluate_on_device, torch.optim.Adam.step,
-            TorchTetherVecEnv.step)
+    adam_class = torch.optim.Adam
+    real = (trainer._update, trainer.evaluate_on_device, adam_class.step,
+            TorchTetherVecEnv.step, graph_module.CudaCapture,
+            graph_module.GraphedMinibatchStep.__call__)
     adam = _in_phase(counter, "adam", real[2])
 
     def adam_step(self, *args, **kwargs):
-        minibatches[0] += 1
+        if not graphs:
+            minibatches[0] += 1
         return adam(self, *args, **kwargs)
+
+    def graphed_step(self, *args, **kwargs):
+        minibatches[0] += 1
+        return real[5](self, *args, **kwargs)
+
+    class CountedCapture(graph_module.RecordingCapture):
+        def capture(self, fn):
+            replay = super().capture(fn)
+
+            def counted():
+                counter.ops[counter.phase, "graph_replay"] += 1
+                counter.on = False
+                try:
+                    replay()
+                finally:
+                    counter.on = True
+            return counted
 
     trainer._update = _in_phase(counter, "update", real[0])
     trainer.evaluate_on_device = lambda *args, **kwargs: {}
-    torch.optim.Adam.step = adam_step
+    adam_class.step = adam_step
     TorchTetherVecEnv.step = _in_phase(counter, "env", real[3])
+    if graphs:
+        graph_module.CudaCapture = CountedCapture
+        graph_module.GraphedMinibatchStep.__call__ = graphed_step
+        torch.optim.Adam = lambda params, **kw: adam_class(params, **{**kw, "fused": True})
     try:
         with tempfile.TemporaryDirectory() as out, counter:
             run = GpuRun([0], iterations * settings.n_steps * settings.n_envs, env_kwargs,
                          Path(out), torch.device("cpu"), checkpoints=1, eval_episodes=1,
-                         backend=backend)
+                         backend=backend, cuda_graphs=graphs)
             train_seeds(settings, run, log=None)
     finally:
-        (trainer._update, trainer.evaluate_on_device, torch.optim.Adam.step,
-         TorchTetherVecEnv.step) = real
+        (trainer._update, trainer.evaluate_on_device, adam_class.step,
+         TorchTetherVecEnv.step, graph_module.CudaCapture,
+         graph_module.GraphedMinibatchStep.__call__) = real
+        torch.optim.Adam = adam_class
     return counter, minibatches[0]
 
 
-def count(config: Path, backend: str, iterations: int) -> dict:
+def count(config: Path, backend: str, iterations: int, graphs: bool = False) -> dict:
     """Operations per rollout step and per minibatch step, from two runs' difference.
 
     A run of ``iterations`` iterations and one of twice as many: the difference of their
@@ -135,8 +172,8 @@ def count(config: Path, backend: str, iterations: int) -> dict:
     from tether_gym_agents.accel.cli import read_config
 
     settings, _, env_kwargs = read_config(config)[:3]
-    one, mb_one = _run(settings, env_kwargs, backend, iterations)
-    two, mb_two = _run(settings, env_kwargs, backend, 2 * iterations)
+    one, mb_one = _run(settings, env_kwargs, backend, iterations, graphs)
+    two, mb_two = _run(settings, env_kwargs, backend, 2 * iterations, graphs)
     per_iteration = two.ops.copy()
     per_iteration.subtract(one.ops)
     phases = two.by_phase()
@@ -149,7 +186,8 @@ def count(config: Path, backend: str, iterations: int) -> dict:
     in_rollout = per_step * settings.n_steps
     in_updates = (per_update + per_adam) * minibatches
     top = Counter({k: v // iterations for k, v in per_iteration.items() if v > 0})
-    return {"config": str(config), "backend": backend, "iterations": iterations,
+    return {"config": str(config), "backend": backend, "cuda_graphs": graphs,
+            "iterations": iterations,
             "n_steps": settings.n_steps, "minibatches_per_iteration": minibatches,
             "ops_per_rollout_step": round(per_step, 1),
             "of_which_env_step": round(per_env, 1),
@@ -172,14 +210,21 @@ def main(argv=None) -> int:
     p.add_argument("--backend", nargs="+", default=["torch", "numba"],
                    choices=["torch", "numba"])
     p.add_argument("--iterations", type=int, default=4)
+    p.add_argument("--cuda-graphs", action="store_true",
+                   help="count train.py gpu --cuda-graphs: a graph's replay is one launch")
     args = p.parse_args(argv)
     if args.iterations < 1:
         p.error(f"--iterations must be >= 1, got {args.iterations}")
+    if args.cuda_graphs and args.iterations <= WARMUP_STEPS:
+        p.error(f"--cuda-graphs counts replays only from --iterations {WARMUP_STEPS + 1} on "
+                f"(the advantages are captured at their call {WARMUP_STEPS + 1}), got "
+                f"{args.iterations}")
     if not args.config.is_file():
         p.error(f"--config {str(args.config)!r} is not a file")
     torch.set_num_threads(1)
     for backend in args.backend:
-        print(json.dumps(count(args.config, backend, args.iterations)), flush=True)
+        print(json.dumps(count(args.config, backend, args.iterations, args.cuda_graphs)),
+              flush=True)
     return 0
 
 

@@ -137,8 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "env's own row step, CPU) or numba-cuda (that row step compiled for "
                         "the GPU); docs/gpu.md")
     p.add_argument("--cuda-graphs", action="store_true",
-                   help="capture the minibatch step as a CUDA graph and replay it (CUDA "
-                        "devices only; not yet measured on a GPU: docs/gpu.md)")
+                   help="capture the learner's pieces (the rollout step's two halves, the "
+                        "advantages, the minibatch step) as CUDA graphs and replay them "
+                        "(CUDA devices only; not yet measured on a GPU: docs/gpu.md)")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")

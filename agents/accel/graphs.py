@@ -1,29 +1,35 @@
-"""The PPO minibatch step captured as a CUDA graph and replayed (``train.py gpu --cuda-graphs``).
+"""The learner's steps captured as CUDA graphs and replayed (``train.py gpu --cuda-graphs``).
 
-On a GPU, a minibatch step of ``train.py gpu`` is a few hundred small kernels. Their
-launches, not their arithmetic, set its time: ``bench/accel_ops.py`` counts them.
-A CUDA graph records the kernels of one step once. Each later step is then one
-launch of the whole graph ("CUDA Graphs" in PyTorch's CUDA semantics notes: warm-up
-on a side stream, capture with ``torch.cuda.graph``, replay). What a graph needs
-from the step, :func:`~.trainer._minibatch_step` provides:
+On a GPU, each piece of an iteration of ``train.py gpu`` is tens to hundreds of small
+kernels. Their launches, not their arithmetic, set its time: ``bench/accel_ops.py``
+counts them. A CUDA graph records the kernels of a piece once, and each later call is
+then one launch of the whole graph ("CUDA Graphs" in PyTorch's CUDA semantics notes:
+warm-up on a side stream, capture with ``torch.cuda.graph``, replay). Four pieces are
+captured: the two halves of a rollout step around the env's step
+(:meth:`~.rollout.Rollout.act`, :meth:`~.rollout.Rollout.observe`), the advantages
+(:meth:`~.rollout.Rollout.finish`) and the minibatch step
+(:func:`~.trainer._minibatch_step`). The env's step stays eager: its autoreset
+branches on the host. What a graph needs from a piece, they provide:
 
-* no host sync: the distributions skip their argument checks, and the step reads no
+* no host sync: the distributions skip their argument checks, and nothing reads a
   tensor back to the host;
-* no random draw and no sort: the minibatch orders are drawn before the steps
-  (:func:`~.trainer._permutations`), and the step gets its rows ``idx`` as a tensor;
-* fixed inputs: the rollout (:class:`~.trainer.RolloutBatch`), the learning rates and
-  the weights stay in the same storage for the whole run and are refilled in place,
-  so that every replay reads the new values where the capture found the old ones.
+* no sort: the minibatch orders are drawn before the steps
+  (:func:`~.trainer._permutations`), and the step gets its rows ``idx`` as a tensor.
+  The action samples are drawn inside the graph (CUDA graphs replay torch's random
+  draws with fresh numbers);
+* fixed inputs: the rollout's state and buffers (:class:`~.rollout.Rollout`, its step
+  index ``t`` included), the learning rates, the normalisation statistics and the
+  weights stay in the same storage for the whole run and are updated in place, so that
+  every replay reads the new values where the capture found the old ones.
 
-Adam must be built with ``capturable=True`` (the trainer does that when asked for graphs).
-The warm-up steps are ordinary training steps. Nothing is run twice, and nothing is
+Adam must be built with ``capturable=True`` (the trainer does that when asked for
+graphs). The warm-up calls are ordinary calls: nothing is run twice, and nothing is
 left out.
 
 Not yet measured on a GPU. No device was lent to the session that wrote this
-(2026-12-07). Its CPU tests capture and replay the step through
-:class:`RecordingCapture`, which keeps a CUDA graph's rules on the CPU (the recorded
-operations replayed on the recorded tensors, the Python not run again), not CUDA's
-capture itself. Step 4 of
+(2026-12-07). Its CPU tests capture and replay through :class:`RecordingCapture`,
+which keeps a CUDA graph's rules on the CPU (the recorded operations replayed on the
+recorded tensors, the Python not run again), not CUDA's capture itself. Step 4 of
 ``bench/gpu_session3.sh`` runs it on a device.
 """
 
@@ -34,10 +40,10 @@ from collections.abc import Callable
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
-__all__ = ["GraphedMinibatchStep", "CudaCapture", "RecordingCapture"]
+__all__ = ["GraphedCall", "GraphedMinibatchStep", "CudaCapture", "RecordingCapture"]
 
 WARMUP_STEPS = 3
-"""Eager steps of each minibatch shape before its capture (make_graphed_callables' 3)."""
+"""Eager calls of a graphed piece before its capture (make_graphed_callables' 3 warm-ups)."""
 
 
 class CudaCapture:
@@ -160,14 +166,50 @@ def _addresses(batch: tuple, lr: torch.Tensor, opt: torch.optim.Optimizer) -> tu
     return tuple(t.data_ptr() for t in (*batch, lr, *params))
 
 
-class GraphedMinibatchStep:
-    """``step(policy, opt, lr, settings, batch, idx)`` captured once per shape of ``idx``.
+class GraphedCall:
+    """``fn()`` run eagerly :data:`WARMUP_STEPS` times, then captured and replayed.
 
-    The first :data:`WARMUP_STEPS` calls of a shape run ``step`` eagerly, through
-    ``capture.warmup``. The next call captures it, reading a fixed copy of ``idx``. From
-    then on, each call copies its ``idx`` into that copy and replays. A call whose
-    rollout, rates or weights are no longer where the capture found them raises
-    RuntimeError: a replay would read stale memory.
+    ``fn`` takes no arguments and must read and write only tensors that stay in the
+    same storage from call to call (refilled in place): the replays read them where
+    the capture found them. The warm-up calls go through ``capture.warmup`` (a side
+    stream on CUDA) and are ordinary calls: nothing is run twice or left out.
+
+    Parameters
+    ----------
+    fn : callable
+        The work of one call, e.g. :meth:`~.rollout.Rollout.act`.
+    capture : CudaCapture or RecordingCapture, optional
+        The graph API (default: :class:`CudaCapture`).
+    """
+
+    def __init__(self, fn: Callable[[], None], capture=None):
+        self._fn = fn
+        self._capture = CudaCapture() if capture is None else capture
+        self._calls = 0
+        self._replay: Callable[[], None] | None = None
+
+    @property
+    def captured(self) -> bool:
+        """Whether the capture happened (the calls are replays from then on)."""
+        return self._replay is not None
+
+    def __call__(self) -> None:
+        """One call: a warm-up, or the capture and its first replay, or a replay."""
+        if self._replay is None:
+            self._calls += 1
+            if self._calls <= WARMUP_STEPS:
+                self._capture.warmup(self._fn)
+                return
+            self._replay = self._capture.capture(self._fn)
+        self._replay()
+
+
+class GraphedMinibatchStep:
+    """``step(policy, opt, lr, settings, batch, idx)``: a :class:`GraphedCall` per idx shape.
+
+    Each call copies its ``idx`` into a tensor fixed for its shape, which the step reads.
+    A call whose rollout, rates or weights are no longer where the first call of its
+    shape found them raises RuntimeError: a replay would read stale memory.
 
     Parameters
     ----------
@@ -180,30 +222,24 @@ class GraphedMinibatchStep:
     def __init__(self, step: Callable, capture=None):
         self._step = step
         self._capture = CudaCapture() if capture is None else capture
-        self._warm: dict[tuple, int] = {}
         self._graphs: dict[tuple, tuple] = {}
 
     @property
     def captured(self) -> int:
         """How many graphs (minibatch shapes) are captured."""
-        return len(self._graphs)
+        return sum(call.captured for call, _, _ in self._graphs.values())
 
     def __call__(self, policy, opt, lr, settings, batch: tuple, idx: torch.Tensor) -> None:
-        """One minibatch step: warm-up, capture and replay, or replay."""
+        """One minibatch step: a warm-up, the capture, or a replay."""
         key = tuple(idx.shape)
         if key not in self._graphs:
-            self._warm[key] = self._warm.get(key, 0) + 1
-            if self._warm[key] <= WARMUP_STEPS:
-                self._capture.warmup(lambda: self._step(policy, opt, lr, settings, batch, idx))
-                return
             fixed_idx = idx.clone()
-            opt.zero_grad(set_to_none=True)  # the captured backward makes the gradients
-            replay = self._capture.capture(
-                lambda: self._step(policy, opt, lr, settings, batch, fixed_idx))
-            self._graphs[key] = (replay, fixed_idx, _addresses(batch, lr, opt))
-        replay, fixed_idx, addresses = self._graphs[key]
+            call = GraphedCall(lambda: self._step(policy, opt, lr, settings, batch, fixed_idx),
+                               self._capture)
+            self._graphs[key] = (call, fixed_idx, _addresses(batch, lr, opt))
+        call, fixed_idx, addresses = self._graphs[key]
         if _addresses(batch, lr, opt) != addresses:
             raise RuntimeError("GraphedMinibatchStep: the rollout, learning rates or weights "
                                "moved since the capture; refill them in place")
         fixed_idx.copy_(idx)
-        replay()
+        call()

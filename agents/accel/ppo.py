@@ -78,7 +78,8 @@ def learning_rate_at(settings: PPOSettings, progress_remaining: float) -> float:
 class RunningStats:
     """Running mean and variance per seed (SB3's ``RunningMeanStd``, parallel update).
 
-    ``mean``, ``var`` of shape (S, d); ``count`` (S,), started at 1e-4 as SB3's.
+    ``mean``, ``var`` of shape (S, d); ``count`` (S,), started at 1e-4 as SB3's; updated
+    in place.
     """
 
     def __init__(self, seeds: int, dim: int, device, dtype=torch.float64):
@@ -98,9 +99,11 @@ class RunningStats:
         m_a = self.var * self.count[:, None]
         m_b = batch_var * batch_count
         m2 = m_a + m_b + delta.square() * (self.count * batch_count / tot)[:, None]
-        self.mean = new_mean
-        self.var = m2 / tot[:, None]
-        self.count = tot
+        new_var = m2 / tot[:, None]
+        # in place: a captured CUDA graph reads the statistics where it found them
+        self.mean.copy_(new_mean)
+        self.var.copy_(new_var)
+        self.count.copy_(tot)
 
 
 def _orthogonal(shape, gain: float, generator: torch.Generator, device) -> torch.Tensor:

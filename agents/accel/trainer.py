@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -32,34 +33,14 @@ from ..files.run_folder import (
     write_train_info,
 )
 from ..files.safe_format import ObsNormalization, save_agent
-from .graphs import GraphedMinibatchStep
-from .ppo import MultiSeedPolicy, PPOSettings, RunningStats, learning_rate_at
+from .graphs import GraphedCall, GraphedMinibatchStep
+from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
+from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
 
 __all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE"]
 
 TRAIN_LOG_FILE = "train_log.json"
-
-
-def _normalize(obs: torch.Tensor, stats: RunningStats, s: PPOSettings) -> torch.Tensor:
-    """VecNormalize's observation formula, per seed: clip((x - mean) / sqrt(var + eps))."""
-    x = (obs.to(stats.mean.dtype) - stats.mean[:, None, :]) \
-        / torch.sqrt(stats.var[:, None, :] + s.norm_epsilon)
-    return torch.clamp(x, -s.clip_obs, s.clip_obs).to(torch.float32)
-
-
-def scale_rewards(rew, done, returns, stats: RunningStats, s: PPOSettings):
-    """VecNormalize's reward scaling, per seed: (scaled rewards, updated returns).
-
-    rew, done, returns (S, N): the running discounted return takes the step's reward,
-    its statistics ``stats`` (S, 1) are updated, the reward is divided by the return's
-    standard deviation and clipped to +-``clip_reward``, and ended rows' returns restart.
-    """
-    returns = returns * s.gamma + rew
-    stats.update(returns[..., None])
-    scale = torch.sqrt(stats.var[:, :1] + s.norm_epsilon)
-    scaled = torch.clamp(rew / scale, -s.clip_reward, s.clip_reward)
-    return scaled, torch.where(done, torch.zeros_like(returns), returns)
 
 
 def _sb3_policy(policy: MultiSeedPolicy, s: int, env: TorchTetherVecEnv, settings: PPOSettings):
@@ -93,8 +74,9 @@ class GpuRun:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
     ``compile``: the env's step through ``torch.compile``; ``backend``: the env's step
     backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend);
-    ``cuda_graphs``: the minibatch step captured as a CUDA graph and replayed
-    (:class:`~.graphs.GraphedMinibatchStep`, CUDA devices only).
+    ``cuda_graphs``: the rollout's pieces and the minibatch step captured as CUDA graphs
+    and replayed (:mod:`.graphs`; CUDA devices, or the CPU through
+    :class:`~.graphs.RecordingCapture` in the tests).
     """
 
     seeds: list[int]
@@ -127,16 +109,17 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     torch.manual_seed(int(seeds[0]))
     env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
                             autoreset_mode="same_step", check_actions=False,
-                            compile=run.compile, backend=run.backend, **env_kwargs)
+                            compile=run.compile, backend=run.backend, full_info=False,
+                            **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's rate scales its Adam step instead (see _minibatch_step), so that the
     # seeds of one optimizer can have their own (adaptive) learning rates
     opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5,
-                           fused=device.type == "cuda", capturable=run.cuda_graphs)
-    obs_stats = RunningStats(S, d, device)
-    ret_stats = RunningStats(S, 1, device)
-    returns = torch.zeros((S, N), dtype=torch.float64, device=device)
+                           fused=device.type == "cuda",
+                           capturable=run.cuda_graphs and device.type == "cuda")
+    rollout = Rollout(policy, settings, d, a, device)
+    obs_stats = rollout.obs_stats
     runs = [seed_dir(out, k) for k in seeds]
     for folder in runs:
         folder.mkdir(parents=True, exist_ok=True)
@@ -148,23 +131,14 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
         if command:
             append_command(folder, command)
     raw, _ = env.reset()
-    obs_raw = raw.view(S, N, d)
-    obs_stats.update(obs_raw)
-    obs = _normalize(obs_raw, obs_stats, settings)
-    episode_start = torch.ones((S, N), dtype=torch.bool, device=device)
-    buf_obs = torch.zeros((T, S, N, d), device=device)
-    buf_act = torch.zeros((T, S, N, a), device=device)
-    buf_logp = torch.zeros((T, S, N), device=device)
-    buf_val = torch.zeros((T, S, N), device=device)
-    buf_rew = torch.zeros((T, S, N), device=device)
-    buf_start = torch.zeros((T, S, N), device=device)
-    batch = RolloutBatch(T, S, N, d, a, device)
-    minibatch_step = (GraphedMinibatchStep(_minibatch_step) if run.cuda_graphs
-                      else _minibatch_step)
-    ep_ret = torch.zeros((S, N), dtype=torch.float64, device=device)
-    done_eps = torch.zeros(S, device=device)
-    done_fail = torch.zeros(S, device=device)
-    done_ret = torch.zeros(S, dtype=torch.float64, device=device)
+    rollout.start(raw)
+    act: Callable[[], None] = rollout.act
+    observe: Callable[[], None] = rollout.observe
+    finish: Callable[[], None] = rollout.finish
+    minibatch_step: Callable[..., None] = _minibatch_step
+    if run.cuda_graphs:  # each captured after its warm-up calls, then replayed
+        act, observe, finish = (GraphedCall(f) for f in (act, observe, finish))
+        minibatch_step = GraphedMinibatchStep(_minibatch_step)
     per_rollout = T * N
     n_updates = max(1, math.ceil(timesteps / per_rollout))
     marks = sorted({max(1, round(n_updates * (i + 1) / checkpoints))
@@ -179,59 +153,23 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
         if settings.lr_schedule != "adaptive":
             lr.fill_(learning_rate_at(settings, progress))
         with torch.no_grad():
-            for t in range(T):
-                dist = policy.distribution(obs)
-                act = dist.sample()
-                buf_obs[t], buf_act[t], buf_start[t] = obs, act, episode_start.float()
-                buf_logp[t] = dist.log_prob(act).sum(-1)
-                buf_val[t] = policy.value(obs)
-                raw, rew, term, trunc, info = env.step(
-                    torch.clamp(act, -1.0, 1.0).view(S * N, a))
-                rew = rew.view(S, N)
-                term, trunc = term.view(S, N), trunc.view(S, N)
-                done = term | trunc
-                obs_raw = raw.view(S, N, d)
-                obs_stats.update(obs_raw)
-                obs = _normalize(obs_raw, obs_stats, settings)
-                scaled, returns = scale_rewards(rew, done, returns, ret_stats, settings)
-                # bootstrap the value of a truncated episode's last observation (SB3's PPO)
-                last_obs = _normalize(info["final_obs"].view(S, N, d), obs_stats, settings)
-                boot = settings.gamma * policy.value(last_obs)
-                scaled = scaled + torch.where(trunc, boot.to(scaled.dtype),
-                                              torch.zeros_like(scaled))
-                buf_rew[t] = scaled.float()
-                ep_ret += rew
-                done_eps += done.sum(dim=1)
-                done_fail += term.sum(dim=1)
-                done_ret += torch.where(done, ep_ret, torch.zeros_like(ep_ret)).sum(dim=1)
-                ep_ret = torch.where(done, torch.zeros_like(ep_ret), ep_ret)
-                episode_start = done
-            last_val = policy.value(obs)
-            adv = torch.zeros_like(buf_rew)
-            gae = torch.zeros((S, N), device=device)
-            for t in range(T - 1, -1, -1):
-                if t == T - 1:
-                    nonterminal, next_val = 1.0 - episode_start.float(), last_val
-                else:
-                    nonterminal, next_val = 1.0 - buf_start[t + 1], buf_val[t + 1]
-                delta = buf_rew[t] + settings.gamma * next_val * nonterminal - buf_val[t]
-                gae = delta + settings.gamma * settings.gae_lambda * nonterminal * gae
-                adv[t] = gae
-            ret = adv + buf_val
+            for _ in range(T):
+                act()
+                raw, rew, term, trunc, info = env.step(rollout.action.view(S * N, a))
+                rollout.take(raw, rew, term, trunc, info["final_obs"])
+                observe()
+            finish()
         steps += per_rollout
-        batch.fill(buf_obs, buf_act, buf_logp, adv, ret)
-        _update(policy, opt, lr, settings, batch, minibatch_step)
+        _update(policy, opt, lr, settings, rollout.batch, minibatch_step)
         out_of_time = time.perf_counter() - t0 > max_seconds
         if update in marks or out_of_time:
             wall = time.perf_counter() - t0
+            eps = rollout.done_eps
             record: dict[str, Any] = {"steps": steps, "wall_time_s": round(wall, 2),
-                      "episodes": done_eps.tolist(),
-                      "failed": done_fail.tolist(),
-                      "mean_return": (done_ret / done_eps.clamp(min=1)).tolist()}
+                      "episodes": eps.tolist(), "failed": rollout.done_fail.tolist(),
+                      "mean_return": (rollout.done_ret / eps.clamp(min=1)).tolist()}
             history.append(record)
-            done_eps.zero_()
-            done_fail.zero_()
-            done_ret.zero_()
+            rollout.clear_counts()
             training = [{"command": command, "num_timesteps": steps,
                          "wall_time_s": round(wall, 1), "device": str(device)}] * S
             _write_agents(runs, policy, obs_stats, env, settings, env_kwargs, training,
@@ -276,7 +214,7 @@ def evaluate_on_device(policy, obs_stats, settings, env_kwargs, device, episodes
     :func:`deterministic_episodes` with the seeds' normalised mean actions.
     """
     def act(raw: torch.Tensor) -> torch.Tensor:
-        return policy.mean_action(_normalize(raw, obs_stats, settings))
+        return policy.mean_action(normalize(raw, obs_stats, settings))
 
     return deterministic_episodes(act, len(policy.seeds), env_kwargs, device, episodes, seed)
 
@@ -337,34 +275,6 @@ def _permutations(epochs: int, S: int, M: int, device) -> torch.Tensor:
     """
     return torch.stack([torch.argsort(torch.rand((S, M), device=device), dim=1)
                         for _ in range(epochs)])
-
-
-class RolloutBatch:
-    """One iteration's samples per seed, flattened (S, T N, ...), in tensors kept for the run.
-
-    The minibatch steps read them where they are: a captured CUDA graph
-    (:class:`~.graphs.GraphedMinibatchStep`) reads them again at every replay, so
-    :meth:`fill` writes each rollout into the same storage.
-    """
-
-    def __init__(self, T: int, S: int, N: int, d: int, a: int, device):
-        M = T * N
-        self.T, self.N = T, N
-        self.obs = torch.zeros((S, M, d), device=device)
-        self.act = torch.zeros((S, M, a), device=device)
-        self.logp = torch.zeros((S, M), device=device)
-        self.adv = torch.zeros((S, M), device=device)
-        self.ret = torch.zeros((S, M), device=device)
-
-    def tensors(self) -> tuple[torch.Tensor, ...]:
-        """(obs, act, old log-prob, advantage, return), as the minibatch step takes them."""
-        return self.obs, self.act, self.logp, self.adv, self.ret
-
-    def fill(self, obs, act, old_logp, adv, ret) -> None:
-        """Copy a rollout's buffers (T, S, N, ...) in, seed-major, (time, env) order."""
-        for dst, src in zip(self.tensors(), (obs, act, old_logp, adv, ret), strict=True):
-            S = src.shape[1]
-            dst.view(S, self.T, self.N, *src.shape[3:]).copy_(src.transpose(0, 1))
 
 
 def _minibatch_step(policy, opt, lr, settings: PPOSettings, batch: tuple, idx) -> None:

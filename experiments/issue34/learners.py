@@ -41,13 +41,13 @@ def rsl_env(num: int, seed: int, env_kwargs: dict, device, reward_norm=None):
     """TorchTetherVecEnv as an rsl_rl ``VecEnv`` (same-step autoreset, ``time_outs``).
 
     ``reward_norm``: PPOSettings whose VecNormalize reward scaling (the home-made
-    learner's, ``trainer.scale_rewards``) the env applies to its rewards; None: raw.
+    learner's, ``rollout.scale_rewards``) the env applies to its rewards; None: raw.
     """
     from rsl_rl.env import VecEnv
     from tensordict import TensorDict
 
     from tether_gym_agents.accel.ppo import RunningStats
-    from tether_gym_agents.accel.trainer import scale_rewards
+    from tether_gym_agents.accel.rollout import scale_rewards
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
     class TetherRslEnv(VecEnv):

@@ -1,12 +1,13 @@
-"""The minibatch step as a CUDA graph (``train.py gpu --cuda-graphs``), checked on the CPU.
+"""The learner's pieces as CUDA graphs (``train.py gpu --cuda-graphs``), checked on the CPU.
 
-A capture needs a step free of host syncs, random draws and sorts, and fed through
-fixed inputs. The first is counted here with a dispatch mode. The second is checked
-by capturing and replaying the step through :class:`RecordingCapture`, which replays
-the recorded aten operations on the recorded tensors without running the Python again,
-as a CUDA graph does: the result must be the eager step's, bitwise. CUDA's
-capture itself is run by ``test_a_cuda_graph_trains_what_the_eager_step_trains`` where
-torch sees a GPU, and skipped elsewhere (CI has none).
+A capture needs pieces free of host syncs and sorts (the minibatch step also of random
+draws), fed through fixed inputs. The first is counted here with a dispatch mode. The
+second is checked by capturing and replaying through :class:`RecordingCapture`, which
+replays the recorded aten operations on the recorded tensors without running the
+Python again, as a CUDA graph does: the results must be the eager ones, bitwise, for
+the minibatch step, the rollout's pieces and a whole ``train_seeds`` run. CUDA's
+capture itself is run where torch sees a GPU (the device-parametrised tests and
+``test_train_gpu_with_cuda_graphs_runs_on_a_gpu``), and skipped elsewhere (CI has none).
 """
 
 from __future__ import annotations
@@ -21,12 +22,14 @@ from torch.utils._python_dispatch import TorchDispatchMode  # noqa: E402
 
 from tether_gym_agents.accel.graphs import (  # noqa: E402
     WARMUP_STEPS,
+    CudaCapture,
+    GraphedCall,
     GraphedMinibatchStep,
     RecordingCapture,
 )
 from tether_gym_agents.accel.ppo import MultiSeedPolicy, PPOSettings  # noqa: E402
+from tether_gym_agents.accel.rollout import Rollout, RolloutBatch  # noqa: E402
 from tether_gym_agents.accel.trainer import (  # noqa: E402
-    RolloutBatch,
     _minibatch_step,
     _permutations,
     _update,
@@ -53,23 +56,42 @@ class _Ops(TorchDispatchMode):
         return func(*args, **(kwargs or {}))
 
 
-def _learner(schedule="linear", seeds=(3, 4), obs_dim=6, act_dim=2, fused=False):
-    """Settings, policy, Adam and rates; ``fused``: the CPU's fused Adam, which keeps its
-    step count on the device as CUDA's capturable Adam does (the default one reads it
-    back to the host)."""
+DEVICES = ["cpu"] + (["cuda"] if torch.cuda.is_available() else [])
+"""The CPU, through RecordingCapture; a GPU, where there is one, through CUDA's capture."""
+
+
+def _capture(device):
+    return RecordingCapture() if device == "cpu" else CudaCapture()
+
+
+def _same(x, y, device) -> bool:
+    """Bitwise on the CPU; on a GPU to float32 rounding (its kernels may sum in another
+    order from run to run)."""
+    if device == "cpu":
+        return torch.equal(x, y)
+    return bool(torch.allclose(x, y, rtol=1e-5, atol=1e-7))
+
+
+def _learner(schedule="linear", seeds=(3, 4), obs_dim=6, act_dim=2, fused=False,
+             device="cpu"):
+    """Settings, policy, Adam and rates; ``fused``: the fused Adam, which on the CPU keeps
+    its step count on the device as CUDA's capturable Adam does (the CPU's default one
+    reads it back to the host); on a GPU the capturable fused Adam."""
     settings = PPOSettings(n_envs=8, n_steps=4, batch_size=8, n_epochs=2, lr_schedule=schedule,
                            net_arch=(16, 16), log_std_init=-1.0)
-    policy = MultiSeedPolicy(list(seeds), obs_dim, act_dim, settings, "cpu")
-    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5, fused=fused)
-    lr = torch.full((len(seeds),), 3e-3)
+    policy = MultiSeedPolicy(list(seeds), obs_dim, act_dim, settings, device)
+    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5, fused=fused,
+                           capturable=device != "cpu")
+    lr = torch.full((len(seeds),), 3e-3, device=device)
     return settings, policy, opt, lr
 
 
-def _rollout(g, T, S, N, d, a):
+def _rollout(g, T, S, N, d, a, device="cpu"):
     """Random rollout buffers (T, S, N, ...) as the trainer fills them."""
-    return (torch.randn((T, S, N, d), generator=g), torch.randn((T, S, N, a), generator=g),
-            torch.randn((T, S, N), generator=g) - 2.0, torch.randn((T, S, N), generator=g),
-            torch.randn((T, S, N), generator=g))
+    return tuple(x.to(device) for x in (
+        torch.randn((T, S, N, d), generator=g), torch.randn((T, S, N, a), generator=g),
+        torch.randn((T, S, N), generator=g) - 2.0, torch.randn((T, S, N), generator=g),
+        torch.randn((T, S, N), generator=g)))
 
 
 @pytest.mark.parametrize("schedule", ["linear", "adaptive"])
@@ -121,24 +143,25 @@ def test_permutations_are_one_argsort_of_rand_per_epoch():
         assert torch.equal(perms[e].sort(dim=1).values, torch.arange(7).expand(2, 7))
 
 
+@pytest.mark.parametrize("device", DEVICES)
 @pytest.mark.parametrize(("N", "schedule", "graphs"),
                          [(8, "linear", 1), (9, "adaptive", 2)])
-def test_a_replayed_step_is_the_eager_step(N, schedule, graphs):
-    """Three iterations of ``_update`` on fresh rollouts: the graphed step (through
-    RecordingCapture) leaves the weights, Adam's moments and the rates bitwise as the
-    eager step does. With 9 envs x 4 steps the last minibatch of an epoch is 4 rows, not 8:
-    a second graph."""
+def test_a_replayed_step_is_the_eager_step(N, schedule, graphs, device):
+    """Three iterations of ``_update`` on fresh rollouts: the graphed step leaves the
+    weights, Adam's moments and the rates as the eager step does (bitwise on the CPU).
+    With 9 envs x 4 steps the last minibatch of an epoch is 4 rows, not 8: a second
+    graph."""
     T, S, d, a = 4, 2, 6, 2
     results = []
     for graphed in (False, True):
-        settings, policy, opt, lr = _learner(schedule, fused=True)
-        step = GraphedMinibatchStep(_minibatch_step, RecordingCapture()) if graphed \
+        settings, policy, opt, lr = _learner(schedule, fused=True, device=device)
+        step = GraphedMinibatchStep(_minibatch_step, _capture(device)) if graphed \
             else _minibatch_step
-        batch = RolloutBatch(T, S, N, d, a, "cpu")
+        batch = RolloutBatch(T, S, N, d, a, device)
         g = torch.Generator().manual_seed(11)
         torch.manual_seed(7)
         for _ in range(3):
-            batch.fill(*_rollout(g, T, S, N, d, a))
+            batch.fill(*_rollout(g, T, S, N, d, a, device))
             _update(policy, opt, lr, settings, batch, step)
         if graphed:
             assert step.captured == graphs
@@ -146,8 +169,57 @@ def test_a_replayed_step_is_the_eager_step(N, schedule, graphs):
                                                                              "exp_avg_sq")]
         results.append([*(p.detach() for p in policy.parameters()), *moments, lr])
     eager, replayed = results
-    assert all(torch.equal(x, y) for x, y in zip(eager, replayed, strict=True))
-    assert not torch.equal(eager[0], _learner(schedule)[1].pi_w[0])  # it trained
+    assert all(_same(x, y, device) for x, y in zip(eager, replayed, strict=True))
+    assert not torch.equal(eager[0].cpu(), _learner(schedule)[1].pi_w[0])  # it trained
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_rollouts_pieces_replay_as_called(device):
+    """Five rollouts of 6 steps on made-up env steps (episodes ending, some truncated):
+    with ``act``, ``observe`` and ``finish`` graphed, everything that does not depend on
+    the sampled actions (statistics, normalised observations, values, scaled and
+    bootstrapped rewards, advantages, returns, episode counts) is as when they are
+    called, and what does (the actions, their log-probabilities) is consistent with the
+    recorded observations at every step."""
+    S, N, T, d, a = 2, 5, 6, 4, 2
+    settings = PPOSettings(n_envs=N, n_steps=T, net_arch=(8, 8), log_std_init=-1.0)
+    g = torch.Generator().manual_seed(3)
+    steps = [(torch.randn((S * N, d), generator=g, dtype=torch.float64) * 2.0 + 1.0,
+              torch.randn(S * N, generator=g, dtype=torch.float64),
+              torch.rand(S * N, generator=g) < 0.1, torch.rand(S * N, generator=g) < 0.15,
+              torch.randn((S * N, d), generator=g, dtype=torch.float64))
+             for _ in range(5 * T + 1)]
+    out = []
+    for graphed in (False, True):
+        torch.manual_seed(0)
+        policy = MultiSeedPolicy([1, 2], d, a, settings, device)
+        rollout = Rollout(policy, settings, d, a, device)
+        rollout.start(steps[0][0].to(device))
+        pieces = [rollout.act, rollout.observe, rollout.finish]
+        if graphed:
+            pieces = [GraphedCall(f, _capture(device)) for f in pieces]
+        act, observe, finish = pieces
+        actions = []
+        with torch.no_grad():
+            for k in range(5):  # finish() is captured at its call 4
+                for t in range(T):
+                    act()
+                    actions.append(rollout.action.clone())
+                    rollout.take(*(x.to(device) for x in steps[1 + k * T + t]))
+                    observe()
+                finish()
+                logp = policy.distribution(rollout.batch.obs).log_prob(
+                    rollout.batch.act).sum(-1)   # all steps at once: not bitwise
+                assert torch.allclose(logp, rollout.batch.logp, rtol=1e-5, atol=1e-6)
+                assert _same(torch.stack(actions[-T:]).transpose(0, 1).reshape(S, T * N, a),
+                             rollout.batch.act.clamp(-1.0, 1.0), device)
+        if graphed:
+            assert all(piece.captured for piece in pieces)
+        out.append([rollout.obs_stats.mean, rollout.obs_stats.var, rollout.ret_stats.var,
+                    rollout.obs, rollout.buf_val, rollout.buf_rew, rollout.batch.adv,
+                    rollout.batch.ret, rollout.done_eps, rollout.done_ret, rollout.t])
+    assert all(_same(x, y, device) for x, y in zip(*out, strict=True))
+    assert out[0][8].sum() > 0 and int(out[0][10]) == 0
 
 
 def test_a_replay_whose_inputs_moved_is_refused():
@@ -206,18 +278,65 @@ def test_the_cpus_default_adam_cannot_be_captured():
         step(policy, opt, lr, settings, batch.tensors(), idx)
 
 
+def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch):
+    """``train_seeds`` with every graph of ``--cuda-graphs`` (the rollout's two halves,
+    its advantages, the minibatch step), captured and replayed through RecordingCapture
+    on the CPU: five iterations, each piece captured after its warm-up, end with bitwise
+    the eager run's weights, statistics and episode counts. Both runs use the CPU's fused
+    Adam, which keeps its step count on the device as CUDA's capturable Adam does."""
+    from tether_gym_agents.accel import graphs
+    from tether_gym_agents.accel.trainer import GpuRun, train_seeds
+    from tether_gym_agents.files.safe_format import load_agent
+
+    real_adam = torch.optim.Adam
+    monkeypatch.setattr(torch.optim, "Adam",
+                        lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
+    monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
+    captures = []
+    real_capture = RecordingCapture.capture
+
+    def counted_capture(self, fn):
+        captures.append(fn)
+        return real_capture(self, fn)
+
+    monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
+    settings = PPOSettings(n_envs=4, n_steps=8, batch_size=16, n_epochs=2,
+                           net_arch=(16, 16))
+    summaries, weights = [], []
+    for graphed in (False, True):
+        out = tmp_path / ("graphed" if graphed else "eager")
+        # episodes of about 13 steps: truncations, bootstraps and restarts in the run
+        env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05}
+        run = GpuRun([0, 1], 5 * 8 * 4, env_kwargs, out, torch.device("cpu"),
+                     checkpoints=5, eval_episodes=2, backend="numba", cuda_graphs=graphed)
+        summaries.append(train_seeds(settings, run, log=None))
+        weights.append([load_agent(out / f"seed_{k}") for k in (0, 1)])
+    assert len(captures) == 4  # act, observe, finish, one minibatch shape
+    eager, graphed = summaries
+    assert sum(sum(h["episodes"]) for h in eager["history"]) >= 10
+    for key in ("episodes", "failed", "mean_return"):
+        assert [h[key] for h in eager["history"]] == [h[key] for h in graphed["history"]]
+    assert eager["final"] == graphed["final"]
+    for (p_e, meta_e), (p_g, meta_g) in zip(*weights, strict=True):
+        state_e, state_g = p_e.state_dict(), p_g.state_dict()
+        assert all(torch.equal(state_e[k], state_g[k]) for k in state_e)
+        norm_e, norm_g = meta_e["obs_normalization"], meta_g["obs_normalization"]
+        assert all((norm_e[k] == norm_g[k]).all() for k in ("mean", "var"))
+        assert norm_e["count"] == norm_g["count"] > 5 * 8 * 4
+
+
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-def test_a_cuda_graph_trains_what_the_eager_step_trains(tmp_path):
-    """On a GPU: ``train.py gpu --cuda-graphs`` ends near the eager run's weights (float32;
-    the capturable Adam is not the eager run's kernel, so not bitwise)."""
+def test_train_gpu_with_cuda_graphs_runs_on_a_gpu(tmp_path):
+    """On a GPU: ``train.py gpu --cuda-graphs`` trains four iterations (every piece
+    captured and replayed) and writes agents with finite weights. (Its samples are drawn
+    inside the graphs, so its weights are not the eager run's: the pieces' equality is
+    the device-parametrised tests' above.)"""
     from tether_gym_agents.cli.train import main as train_main
     from tether_gym_agents.files.safe_format import load_agent
 
-    weights = []
-    for flag in ([], ["--cuda-graphs"]):
-        out = tmp_path / ("graphs" if flag else "eager")
-        assert train_main(["gpu", "--device", "cuda", "--out", str(out), "--n-envs", "16",
-                           "--timesteps", str(16 * 64 * 3), *flag]) == 0
-        weights.append(load_agent(out / "seed_0")[0].state_dict())
-    for name, w in weights[0].items():
-        assert (weights[1][name] - w).abs().max() <= 1e-4 * (1.0 + w.abs().max()), name
+    out = tmp_path / "graphs"
+    assert train_main(["gpu", "--device", "cuda", "--out", str(out), "--n-envs", "16",
+                       "--seeds", "2", "--timesteps", str(16 * 64 * 5), "--cuda-graphs"]) == 0
+    for k in (0, 1):
+        state = load_agent(out / f"seed_{k}")[0].state_dict()
+        assert all(torch.isfinite(w).all() for w in state.values())

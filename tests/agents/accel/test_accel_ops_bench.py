@@ -35,7 +35,7 @@ def tiny(tmp_path_factory):
 def counts(accel_ops, tiny):
     """(backend, iterations) -> the script's figures for the tiny config."""
     return {key: accel_ops.count(tiny, *key) for key in
-            (("numba", 1), ("numba", 2), ("torch", 1))}
+            (("numba", 1), ("numba", 2), ("torch", 1), ("numba", 4, True))}
 
 
 def test_counts_are_per_iteration_and_add_up(counts):
@@ -66,3 +66,14 @@ def test_the_numba_backends_step_is_a_few_torch_operations(counts):
     assert torch_port["of_which_env_step"] > 1000
     assert numba["of_which_env_step"] < torch_port["of_which_env_step"] / 10
     assert numba["ops_per_minibatch_step"] == torch_port["ops_per_minibatch_step"]
+
+
+def test_with_cuda_graphs_the_host_launches_the_env_and_the_replays(counts):
+    """``--cuda-graphs`` (RecordingCapture on the CPU): a minibatch step is its row
+    indices' copy and one replay, with the minibatch orders' draws shared out; a rollout
+    step is the env's step, its five outputs copied in and two replays."""
+    eager, graphed = counts["numba", 1], counts["numba", 4, True]
+    assert graphed["minibatches_per_iteration"] == eager["minibatches_per_iteration"]
+    assert graphed["of_which_adam"] == 0 and graphed["ops_per_minibatch_step"] <= 3
+    assert graphed["ops_per_rollout_step"] - graphed["of_which_env_step"] <= 8
+    assert graphed["ops_per_iteration"] < eager["ops_per_iteration"] / 2

@@ -12,7 +12,7 @@ import torch  # noqa: E402
 from stable_baselines3.common.running_mean_std import RunningMeanStd  # noqa: E402
 
 from tether_gym_agents.accel.ppo import PPOSettings, RunningStats  # noqa: E402
-from tether_gym_agents.accel.trainer import scale_rewards  # noqa: E402
+from tether_gym_agents.accel.rollout import scale_rewards  # noqa: E402
 
 
 def test_scale_rewards_is_vecnormalize_per_seed():

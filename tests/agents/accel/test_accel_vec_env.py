@@ -131,7 +131,31 @@ def test_autoreset_next_step_and_same_step():
             assert env.steps[row] == 0
 
 
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+def test_without_full_info_a_step_returns_the_same_and_less_info(mode):
+    """``full_info=False`` (what ``train.py gpu`` asks for) steps the same episodes, episode
+    ends included, and its ``info`` holds only the costs and the same-step entries."""
+    envs = [TorchTetherVecEnv(8, device=DEVICE, seed=5, autoreset_mode=mode, backend=BACKEND,
+                              full_info=full, **TRAINING) for full in (True, False)]
+    for env in envs:
+        env.reset()
+    g = torch.Generator().manual_seed(2)
+    ended = 0
+    for _ in range(300):
+        action = (torch.rand((8, 2), generator=g, dtype=torch.float64) * 2.4 - 1.2).to(DEVICE)
+        (*full, info_full), (*lean, info_lean) = (env.step(action) for env in envs)
+        assert all(torch.equal(x, y) for x, y in zip(full, lean, strict=True))
+        for key, value in info_lean.items():
+            assert torch.equal(value, info_full[key]), key
+        ended += int((full[2] | full[3]).sum())
+    same_step = {"final_obs", "final_failure"} if mode == "same_step" else set()
+    assert set(info_lean) == {"cost", "cost_slack", "cost_length", "cost_tumble"} | same_step
+    assert ended > 0 and len(info_full) > len(info_lean)
+
+
 def test_bad_input_is_refused():
+    with pytest.raises(TypeError, match="full_info"):
+        TorchTetherVecEnv(2, full_info="no")
     env = TorchTetherVecEnv(4, device="cpu")
     with pytest.raises(RuntimeError, match="reset"):
         env.step(torch.zeros(4, 2))
