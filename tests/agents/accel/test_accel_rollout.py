@@ -1,0 +1,98 @@
+"""The GPU learner's rollout against stable-baselines3's: reward scaling, the truncation
+bootstrap, GAE."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+pytest.importorskip("stable_baselines3")
+
+import torch  # noqa: E402
+from stable_baselines3.common.running_mean_std import RunningMeanStd  # noqa: E402
+
+from tether_gym_agents.accel.ppo import MultiSeedPolicy, PPOSettings, RunningStats  # noqa: E402
+from tether_gym_agents.accel.rollout import Rollout, normalize, scale_rewards  # noqa: E402
+
+
+def test_scale_rewards_is_vecnormalize_per_seed():
+    """Two seeds of 5 envs over 40 steps: each seed's rewards scaled as VecNormalize does."""
+    s = PPOSettings(gamma=0.9, clip_reward=1.0)
+    rng = np.random.default_rng(0)
+    rew = rng.normal(2.0, 5.0, (40, 2, 5))
+    done = rng.random((40, 2, 5)) < 0.1
+    stats, returns = RunningStats(2, 1, "cpu"), torch.zeros((2, 5), dtype=torch.float64)
+    sb3 = [(RunningMeanStd(shape=()), np.zeros(5)) for _ in range(2)]
+    clipped = unclipped = 0
+    for t in range(40):
+        got, returns = scale_rewards(torch.as_tensor(rew[t]), torch.as_tensor(done[t]),
+                                     returns, stats, s)
+        for k, (rms, ret) in enumerate(sb3):
+            # stable_baselines3.common.vec_env.VecNormalize.step_wait / normalize_reward
+            ret[:] = ret * s.gamma + rew[t, k]
+            rms.update(ret)
+            want = np.clip(rew[t, k] / np.sqrt(rms.var + s.norm_epsilon), -s.clip_reward,
+                           s.clip_reward)
+            ret[done[t, k]] = 0.0
+            np.testing.assert_allclose(got[k].numpy(), want, rtol=1e-12)
+            np.testing.assert_allclose(returns[k].numpy(), ret, rtol=1e-12, atol=0)
+        at_clip = int((np.abs(got.numpy()) == s.clip_reward).sum())
+        clipped, unclipped = clipped + at_clip, unclipped + got.numel() - at_clip
+    assert clipped > 0 and unclipped > 0  # both branches of the clip were compared
+
+
+@torch.no_grad()  # as train_seeds runs the rollout
+def test_rollout_bootstraps_truncations_and_computes_sb3s_gae():
+    """Four steps of 2 seeds x 3 envs on made-up env steps. Each step's recorded reward is
+    the scaled reward plus gamma V(final obs) on the truncated rows only (SB3's PPO
+    ``collect_rollouts``); the advantages and returns are SB3's ``RolloutBuffer``'s
+    (``compute_returns_and_advantage``) on the same rewards, values and starts, per seed."""
+    import copy
+
+    from gymnasium import spaces
+    from stable_baselines3.common.buffers import RolloutBuffer
+
+    S, N, T, d, a = 2, 3, 4, 5, 2
+    s = PPOSettings(n_envs=N, n_steps=T, gamma=0.9, gae_lambda=0.8, net_arch=(8,),
+                    log_std_init=-1.0)
+    torch.manual_seed(0)
+    policy = MultiSeedPolicy([0, 1], d, a, s, "cpu")
+    rollout = Rollout(policy, s, d, a, "cpu")
+    g = torch.Generator().manual_seed(4)
+    rollout.start(torch.randn((S * N, d), generator=g, dtype=torch.float64))
+    term = torch.tensor([[0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0],
+                         [0, 0, 0, 0, 0, 0]], dtype=torch.bool)
+    trunc = torch.tensor([[0, 0, 0, 0, 0, 0], [1, 0, 0, 0, 0, 1], [0, 0, 0, 0, 0, 0],
+                          [0, 1, 0, 0, 0, 0]], dtype=torch.bool)
+    for t in range(T):
+        rollout.act()
+        raw = torch.randn((S * N, d), generator=g, dtype=torch.float64)
+        rew = torch.randn(S * N, generator=g, dtype=torch.float64)
+        final = torch.randn((S * N, d), generator=g, dtype=torch.float64)
+        rollout.take(raw, rew, term[t], trunc[t], final)
+        ret_stats, returns = copy.deepcopy(rollout.ret_stats), rollout.returns.clone()
+        scaled, _ = scale_rewards(rew.view(S, N), (term[t] | trunc[t]).view(S, N), returns,
+                                  ret_stats, s)
+        rollout.observe()
+        # the statistics observe() folded the new observations into normalise final_obs
+        boot = s.gamma * policy.value(normalize(final.view(S, N, d), rollout.obs_stats, s))
+        want = scaled + torch.where(trunc[t].view(S, N), boot.double(), 0.0)
+        assert torch.allclose(rollout.buf_rew[t], want.float(), rtol=1e-6, atol=1e-7)
+        assert (rollout.buf_rew[t] != scaled.float()).sum() == int(trunc[t].sum())
+    last_val = policy.value(rollout.obs)
+    rollout.finish()
+    for k in range(S):
+        buf = RolloutBuffer(T, spaces.Box(-1, 1, (d,)), spaces.Box(-1, 1, (a,)), "cpu",
+                            gae_lambda=s.gae_lambda, gamma=s.gamma, n_envs=N)
+        for t in range(T):
+            buf.add(rollout.buf_obs[t, k].numpy(), rollout.buf_act[t, k].numpy(),
+                    rollout.buf_rew[t, k].numpy(), rollout.buf_start[t, k].numpy(),
+                    rollout.buf_val[t, k], rollout.buf_logp[t, k])
+        buf.compute_returns_and_advantage(last_val[k], rollout.episode_start[k].numpy())
+        np.testing.assert_allclose(rollout.batch.adv[k].view(T, N).numpy(), buf.advantages,
+                                   rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(rollout.batch.ret[k].view(T, N).numpy(), buf.returns,
+                                   rtol=1e-5, atol=1e-6)
+    assert rollout.buf_start[1:].sum() == int((term | trunc)[:-1].sum())
+    assert int(rollout.t) == 0
