@@ -18,7 +18,10 @@ the CPU's Adam steps each parameter tensor in turn, where ``train.py gpu`` asks 
 torch's fused Adam, a kernel or two for all of them), and prints one JSON line per
 backend. It also counts the host syncs (reads of a tensor's value back to the host) per
 rollout step and per minibatch step, the optimizer's left out (the CPU's Adam reads its
-step counter; CUDA's fused one does not): a CUDA graph can hold none.
+step counter; CUDA's fused one does not): a CUDA graph can hold none. With
+``--cuda-graphs`` it counts what the host launches under ``train.py gpu --cuda-graphs``:
+the graphs are kept by ``RecordingCapture`` on the CPU, a replay counts as one launch
+and Adam is the CPU's fused one (``_run``).
 
 The numba backend's env step is one numba call on the CPU and one kernel launch with
 numba-cuda; the torch operations around it (copies into its rows, resets, autoreset)
