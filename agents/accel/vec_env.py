@@ -45,6 +45,11 @@ CUDA_HINT = ("no CUDA device is available to torch (torch.cuda.is_available() is
              "GPU (pip install -e \".[gpu]\" there)")
 
 
+def _cost_entries(cost: torch.Tensor) -> dict[str, torch.Tensor]:
+    """The ``info`` entries of the cost and its parts: columns of ``cost`` (B, COST_NAMES)."""
+    return {name: cost[:, c] for c, name in enumerate(COST_NAMES)}
+
+
 def resolve_device(device) -> torch.device:
     """``device`` as a torch.device; "cuda" without a CUDA device is a clear error.
 
@@ -459,16 +464,14 @@ class TorchTetherVecEnv:
             info = self.info() if self.full_info else {}
             info["final_obs"] = final_obs
             info["final_failure"] = final_failure
-            for c, name in enumerate(COST_NAMES):
-                info[name] = cost[:, c]
+            info.update(_cost_entries(cost))
             return self.obs.clone(), reward, terminated, truncated, info
         if bool(done.any()):
             self._reset_rows(done)
         terminated = self.failure != 0
         truncated = self.steps_truncated() & ~terminated
         self._autoreset = terminated | truncated
-        info = (self.info() if self.full_info else
-                {name: self.cost[:, c] for c, name in enumerate(COST_NAMES)})
+        info = self.info() if self.full_info else _cost_entries(self.cost)
         return self.obs.clone(), self.reward.clone(), terminated, truncated, info
 
     def steps_truncated(self) -> torch.Tensor:
@@ -533,8 +536,7 @@ class TorchTetherVecEnv:
                   "failure": torch.where(self._start_failed, self._start_code, self.failure)}
         for c, name in enumerate(COMPONENTS):
             values[name] = self.components[:, c]
-        for c, name in enumerate(COST_NAMES):
-            values[name] = self.cost[:, c]
+        values.update(_cost_entries(self.cost))
         return {key: values[key] for key in INFO_KEYS}
 
     def __repr__(self) -> str:
