@@ -24,11 +24,11 @@ the graphs are kept by ``RecordingCapture`` on the CPU, a replay counts as one l
 and Adam is the CPU's fused one (``_run``).
 
 The numba backend's env step is one numba call on the CPU and one kernel launch with
-numba-cuda; the torch operations around it (copies into its rows, resets, autoreset)
-are counted, the numba call is not. A count is a property of the code, not of the
-machine: the same on any CPU, and a lower bound of the GPU's launches (a fused or
-library kernel may launch more than one). What a launch costs on a GPU is not measured
-here.
+numba-cuda: each call counts as one operation (``numba_kernel``), as do the torch
+operations around it (copies into its rows, resets, autoreset). A count is a property
+of the code, not of the machine: the same on any CPU, and a lower bound of the GPU's
+launches (a fused or library kernel may launch more than one). What a launch costs on
+a GPU is not measured here.
 """
 
 from __future__ import annotations
@@ -98,8 +98,12 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     """The operations of one whole ``train_seeds`` call, and its minibatch steps.
 
     Phases: ``update`` (``_update`` less the optimizer), ``adam`` (``Adam.step``),
-    ``env`` (``TorchTetherVecEnv.step``) and ``rollout`` (all else: the start, the
-    policy and normalisation of the rollouts, their GAE, the one checkpoint's files).
+    ``env`` (the parts of ``TorchTetherVecEnv.step`` that the rollout step calls; with
+    graphs only the eager ones, ``step_kernel`` and ``step_autoreset``: the others are
+    inside the rollout step's replays, counted there) and
+    ``rollout`` (all else: the start, the policy and normalisation of the rollouts,
+    their GAE, the one checkpoint's files). A call of the numba row code (a numba-cuda
+    kernel on a GPU) counts as one operation (``numba_kernel``).
     The final check on the training distribution is no part of an iteration and is
     not run (``train_info.json`` gets no figures of it).
 
@@ -110,6 +114,7 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     """
     from tether_gym_agents.accel import graphs as graph_module
     from tether_gym_agents.accel import trainer
+    from tether_gym_agents.accel.row_step import NumbaCpuStep
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
@@ -118,7 +123,9 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     adam_class = torch.optim.Adam
     real = (trainer._update, trainer.evaluate_on_device, adam_class.step,
             TorchTetherVecEnv.step, graph_module.CudaCapture,
-            graph_module.GraphedMinibatchStep.__call__)
+            graph_module.GraphedMinibatchStep.__call__, TorchTetherVecEnv.step_kernel,
+            TorchTetherVecEnv.step_autoreset, NumbaCpuStep._launch,
+            TorchTetherVecEnv.step_begin, TorchTetherVecEnv.step_end)
     adam = _in_phase(counter, "adam", real[2])
 
     def adam_step(self, *args, **kwargs):
@@ -130,9 +137,13 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
         minibatches[0] += 1
         return real[5](self, *args, **kwargs)
 
+    def kernel(self, reset):
+        counter.ops[counter.phase, "numba_kernel"] += 1
+        return real[8](self, reset)
+
     class CountedCapture(graph_module.RecordingCapture):
-        def capture(self, fn):
-            replay = super().capture(fn)
+        def capture(self, fn, generators=()):
+            replay = super().capture(fn, generators)
 
             def counted():
                 counter.ops[counter.phase, "graph_replay"] += 1
@@ -147,6 +158,11 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     trainer.evaluate_on_device = lambda *args, **kwargs: {}
     adam_class.step = adam_step
     TorchTetherVecEnv.step = _in_phase(counter, "env", real[3])
+    TorchTetherVecEnv.step_kernel = _in_phase(counter, "env", real[6])
+    TorchTetherVecEnv.step_autoreset = _in_phase(counter, "env", real[7])
+    NumbaCpuStep._launch = kernel
+    TorchTetherVecEnv.step_begin = _in_phase(counter, "env", real[9])
+    TorchTetherVecEnv.step_end = _in_phase(counter, "env", real[10])
     if graphs:
         graph_module.CudaCapture = CountedCapture
         graph_module.GraphedMinibatchStep.__call__ = graphed_step
@@ -160,7 +176,9 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     finally:
         (trainer._update, trainer.evaluate_on_device, adam_class.step,
          TorchTetherVecEnv.step, graph_module.CudaCapture,
-         graph_module.GraphedMinibatchStep.__call__) = real
+         graph_module.GraphedMinibatchStep.__call__, TorchTetherVecEnv.step_kernel,
+         TorchTetherVecEnv.step_autoreset, NumbaCpuStep._launch,
+         TorchTetherVecEnv.step_begin, TorchTetherVecEnv.step_end) = real
         torch.optim.Adam = adam_class
     return counter, minibatches[0]
 

@@ -76,11 +76,24 @@ class RowStep:
 
     def __call__(self, nu, y, u, action, disturbance, noise, par) -> TaskStep:
         """One step of every row (the class docstring says what goes in and out)."""
+        self.load(nu, y, u, action, disturbance, noise, par)
+        self.launch()
+        return self.result()
+
+    def load(self, nu, y, u, action, disturbance, noise, par) -> None:
+        """Copy a step's inputs into the rows (torch copies: a CUDA graph can hold them)."""
         r = self.rows
         for dst, src in ((r.nu, nu), (r.y, y), (r.command, u), (self.action, action),
                          (r.disturbance, disturbance), (r.noise, noise), (r.par, par)):
             dst.copy_(src)
+
+    def launch(self) -> None:
+        """Run the row code's step on the loaded rows."""
         self._launch(False)
+
+    def result(self) -> TaskStep:
+        """The rows after :meth:`launch`, as a :class:`~.chain.TaskStep` of views."""
+        r = self.rows
         return TaskStep(r.nu, r.y, r.command, r.tension, r.tension_min, r.derivative, r.reward,
                         r.components, r.cost, r.failure, r.obs)
 

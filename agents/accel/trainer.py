@@ -33,7 +33,7 @@ from ..files.run_folder import (
     write_train_info,
 )
 from ..files.safe_format import ObsNormalization, save_agent
-from .graphs import GraphedCall, GraphedMinibatchStep
+from .graphs import GraphedCall, GraphedMinibatchStep, RolloutStep
 from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
@@ -132,12 +132,11 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
             append_command(folder, command)
     raw, _ = env.reset()
     rollout.start(raw)
-    act: Callable[[], None] = rollout.act
-    observe: Callable[[], None] = rollout.observe
+    step = RolloutStep(rollout, env, graphs=run.cuda_graphs)  # the env's step included
     finish: Callable[[], None] = rollout.finish
     minibatch_step: Callable[..., None] = _minibatch_step
     if run.cuda_graphs:  # each captured after its warm-up calls, then replayed
-        act, observe, finish = (GraphedCall(f) for f in (act, observe, finish))
+        finish = GraphedCall(finish)
         minibatch_step = GraphedMinibatchStep(_minibatch_step)
     per_rollout = T * N
     n_updates = max(1, math.ceil(timesteps / per_rollout))
@@ -154,10 +153,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
             lr.fill_(learning_rate_at(settings, progress))
         with torch.no_grad():
             for _ in range(T):
-                act()
-                raw, rew, term, trunc, info = env.step(rollout.action.view(S * N, a))
-                rollout.take(raw, rew, term, trunc, info["final_obs"])
-                observe()
+                step()
             finish()
         steps += per_rollout
         _update(policy, opt, lr, settings, rollout.batch, minibatch_step)

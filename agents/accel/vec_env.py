@@ -10,7 +10,7 @@ line-by-line port of the numba step tested equal to it (tests/agents/accel/).
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 import torch
@@ -27,8 +27,8 @@ from tether_gym.tasks.termination import TUMBLE_ANGLE, Failure
 from . import chain
 from .row_step import NumbaCpuStep, check_cpu
 
-__all__ = ["TorchTetherVecEnv", "chain_consts", "resolve_device", "AUTORESET_MODES",
-           "BACKENDS", "check_backend"]
+__all__ = ["TorchTetherVecEnv", "StepOutputs", "chain_consts", "resolve_device",
+           "AUTORESET_MODES", "BACKENDS", "check_backend"]
 
 BACKENDS = ("torch", "numba", "numba-cuda")
 """``torch``: the step as torch operations (:mod:`.chain`), on any device; ``numba``: the
@@ -43,6 +43,25 @@ sub-env is reset within the step that ended it, its last observation in
 CUDA_HINT = ("no CUDA device is available to torch (torch.cuda.is_available() is False): "
              "use device='cpu', or install a CUDA build of torch on a machine with an NVIDIA "
              "GPU (pip install -e \".[gpu]\" there)")
+
+
+class StepOutputs(NamedTuple):
+    """What a same-step autoreset step returns besides the observation, in fixed tensors.
+
+    Filled by :meth:`TorchTetherVecEnv.step_end` before the autoreset, overwritten by
+    the next step: the step's ``reward`` (num_envs,) and ``cost`` (num_envs,
+    COST_NAMES), the flags ``terminated``, ``truncated`` and ``ended`` (either)
+    (num_envs,) bool, and the ended episodes' last observation ``final_obs``
+    (num_envs, obs_dim) float32 and failure code ``final_failure`` (num_envs,) int64.
+    """
+
+    reward: torch.Tensor
+    cost: torch.Tensor
+    terminated: torch.Tensor
+    truncated: torch.Tensor
+    ended: torch.Tensor
+    final_obs: torch.Tensor
+    final_failure: torch.Tensor
 
 
 def _cost_entries(cost: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -283,6 +302,15 @@ class TorchTetherVecEnv:
         self._start_failed = torch.zeros(num, dtype=torch.bool, device=self.device)
         self._start_code = torch.zeros(num, dtype=torch.int64, device=self.device)
         self._was_reset = False
+        # the step's input and its rows, and the same-step outputs (see the step's parts)
+        self.action_in = z(num, n)
+        self._rows = torch.ones(num, dtype=torch.bool, device=self.device)
+        self.outputs = StepOutputs(
+            reward=z(num), cost=z(num, len(COST_NAMES)),
+            terminated=torch.zeros(num, dtype=torch.bool, device=self.device),
+            truncated=torch.zeros(num, dtype=torch.bool, device=self.device),
+            ended=torch.zeros(num, dtype=torch.bool, device=self.device),
+            final_obs=torch.zeros_like(self.obs), final_failure=torch.zeros_like(self.failure))
 
     # ------------------------------------------------------------------ #
     @property
@@ -397,29 +425,21 @@ class TorchTetherVecEnv:
             pending = pending & ~s["ok"]
             if not bool(pending.any()):
                 break
-        self._start_failed = torch.where(mask, pending, self._start_failed)
+        torch.where(mask, pending, self._start_failed, out=self._start_failed)
         if bool(pending.any()):
-            self._start_code = torch.where(pending, self._start_failure(), self._start_code)
+            torch.where(pending, self._start_failure(), self._start_code, out=self._start_code)
 
     def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
-        """Copy the start ``s`` into the rows of the mask ``rows``."""
+        """Copy the start ``s`` into the rows of the mask ``rows`` (in place)."""
         col = rows[:, None]
-        self.nu = torch.where(rows, s["nu"], self.nu)
-        self.nu_end = torch.where(rows, s["nu_end"], self.nu_end)
-        self.y = torch.where(col, s["y"], self.y)
-        self.par = torch.where(col, s["par"], self.par)
-        self.noise = torch.where(col, s["noise"], self.noise)
-        self.u = torch.where(col, s["u"], self.u)
-        self.tension = torch.where(col, s["tension"], self.tension)
-        self.tension_min = torch.where(col, s["tension_min"], self.tension_min)
-        self.derivative = torch.where(col, s["derivative"], self.derivative)
-        self.obs = torch.where(col, s["obs"], self.obs)
-        zero = torch.zeros_like(self.reward)
-        self.reward = torch.where(rows, zero, self.reward)
-        self.components = torch.where(col, torch.zeros_like(self.components), self.components)
-        self.cost = torch.where(col, torch.zeros_like(self.cost), self.cost)
-        self.failure = torch.where(rows, torch.zeros_like(self.failure), self.failure)
-        self.steps = torch.where(rows, torch.zeros_like(self.steps), self.steps)
+        for name, mask in (("nu", rows), ("nu_end", rows), ("y", col), ("par", col),
+                           ("noise", col), ("u", col), ("tension", col), ("tension_min", col),
+                           ("derivative", col), ("obs", col)):
+            mine = getattr(self, name)
+            torch.where(mask, s[name], mine, out=mine)
+        for name, mask in (("reward", rows), ("components", col), ("cost", col),
+                           ("failure", rows), ("steps", rows)):
+            getattr(self, name).masked_fill_(mask, 0)
 
     def _start_failure(self) -> torch.Tensor:
         """Why each row's start is failed (``ChainBatch._start_code``'s order)."""
@@ -440,39 +460,83 @@ class TorchTetherVecEnv:
         a = torch.as_tensor(actions, device=self.device)
         if a.dtype == torch.bool or a.is_complex():
             raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
-        a = a.to(self.dtype)
         if a.shape != (self.num_envs, self.n):
             raise ValueError(f"actions must have shape ({self.num_envs}, {self.n}) "
                              f"(num_envs, N-1), got {tuple(a.shape)}")
-        done = self._autoreset
         if self.check_actions:  # every row, as the native vector env (ended rows too)
             bad = ~torch.isfinite(a).all(dim=1)
             if bool(bad.any()):
                 rows = torch.nonzero(bad).flatten().tolist()
                 raise ValueError(f"actions must be finite (no NaN or inf); rows {rows} are not")
-        self._advance(a, ~done)
+        self.action_in.copy_(a)  # in the state's dtype
         if self.autoreset_mode == "same_step":
-            terminated = self.failure != 0
-            truncated = self.steps_truncated() & ~terminated
-            reward = self.reward.clone()  # the last step's, before the reset zeroes it
-            cost = self.cost.clone()      # likewise: the step's cost, not the reset's 0
-            final_obs = self.obs.clone()
-            final_failure = self.failure.clone()
-            ended = terminated | truncated
-            if bool(ended.any()):
-                self._reset_rows(ended)
+            self.step_begin()
+            self.step_kernel()
+            self.step_end()
+            self.step_autoreset()
+            o = self.outputs
             info = self.info() if self.full_info else {}
-            info["final_obs"] = final_obs
-            info["final_failure"] = final_failure
-            info.update(_cost_entries(cost))
-            return self.obs.clone(), reward, terminated, truncated, info
+            info["final_obs"] = o.final_obs.clone()
+            info["final_failure"] = o.final_failure.clone()
+            info.update(_cost_entries(o.cost.clone()))
+            return (self.obs.clone(), o.reward.clone(), o.terminated.clone(),
+                    o.truncated.clone(), info)
+        done = self._autoreset
+        self._advance(self.action_in, ~done)
         if bool(done.any()):
             self._reset_rows(done)
         terminated = self.failure != 0
         truncated = self.steps_truncated() & ~terminated
-        self._autoreset = terminated | truncated
+        torch.logical_or(terminated, truncated, out=self._autoreset)
         info = self.info() if self.full_info else _cost_entries(self.cost)
         return self.obs.clone(), self.reward.clone(), terminated, truncated, info
+
+    # The parts of a same-step autoreset step, for a learner that captures them as CUDA
+    # graphs (tether_gym_agents.accel.graphs.GraphedEnvStep): step() calls them in turn.
+    # Every part reads and writes only this env's tensors, which stay in the same storage
+    # from its construction on (updated in place), and only step_kernel (a numba launch)
+    # and step_autoreset (a host branch) cannot be captured.
+    def step_begin(self) -> None:
+        """First part: draw the step's disturbance and noise, and step ``action_in``.
+
+        The torch backend does the whole step here (and :meth:`step_end`'s work); a
+        numba backend copies the inputs into its kernel's rows, for :meth:`step_kernel`.
+        Needs ``autoreset_mode="same_step"`` and a prior :meth:`reset`; no host sync.
+        """
+        if self.autoreset_mode != "same_step" or not self._was_reset:
+            raise RuntimeError(f"the step's parts need autoreset_mode='same_step' (got "
+                               f"{self.autoreset_mode!r}) and a reset() first")
+        torch.logical_not(self._autoreset, out=self._rows)
+        self._advance_begin(self.action_in, self._rows, draw=True)
+        if self._kernel is None:
+            self._same_step_outputs()
+
+    def step_kernel(self) -> None:
+        """Second part: the numba backends' kernel launch (nothing with the torch backend)."""
+        if self._kernel is not None:
+            self._kernel.launch()
+
+    def step_end(self) -> None:
+        """Third part: a numba backend's results into the state, and :attr:`outputs`."""
+        if self._kernel is not None:
+            self._advance_end(self._kernel.result(), self._rows)
+            self._same_step_outputs()
+
+    def step_autoreset(self) -> None:
+        """Last part: reset the rows that ended (a host sync; draws only when one did)."""
+        if bool(self.outputs.ended.any()):
+            self._reset_rows(self.outputs.ended)
+
+    def _same_step_outputs(self) -> None:
+        """The step's flags, reward, cost and last observations into :attr:`outputs`."""
+        o = self.outputs
+        torch.ne(self.failure, 0, out=o.terminated)
+        torch.logical_and(self.steps_truncated(), ~o.terminated, out=o.truncated)
+        torch.logical_or(o.terminated, o.truncated, out=o.ended)
+        # the step's reward and cost, before a reset zeroes them
+        for dst, src in ((o.reward, self.reward), (o.cost, self.cost),
+                         (o.final_obs, self.obs), (o.final_failure, self.failure)):
+            dst.copy_(src)
 
     def steps_truncated(self) -> torch.Tensor:
         """Rows whose episode has reached its length in true anomaly (and that stepped)."""
@@ -483,39 +547,50 @@ class TorchTetherVecEnv:
 
         ``draw`` False keeps the disturbance and noise rows as they are (tests set them).
         """
+        self._advance_begin(a, rows, draw)
+        if self._kernel is not None:
+            self._kernel.launch()
+            self._advance_end(self._kernel.result(), rows)
+
+    def _advance_begin(self, a: torch.Tensor, rows: torch.Tensor, draw: bool) -> None:
+        """The draws, then the torch step and its results, or a numba kernel's inputs."""
         cfg = self.config
         g = self.generator
         if draw and cfg.disturbance > 0.0:
             d = cfg.disturbance
             unit = torch.rand(self.disturbance.shape, generator=g, dtype=self.dtype,
                               device=self.device)
-            self.disturbance = torch.where(rows[:, None], -d + (d - -d) * unit,
-                                           self.disturbance)
+            torch.where(rows[:, None], -d + (d - -d) * unit, self.disturbance,
+                        out=self.disturbance)
         if draw and cfg.obs_noise > 0.0:
             gauss = torch.randn(self.noise.shape, generator=g, dtype=self.dtype,
                                 device=self.device)
-            self.noise = torch.where(rows[:, None], cfg.obs_noise * gauss + self._bias,
-                                     self.noise)
+            torch.where(rows[:, None], cfg.obs_noise * gauss + self._bias, self.noise,
+                        out=self.noise)
+        inputs = (self.nu, self.y, self.u, a, self.disturbance, self.noise, self.par)
+        if self._kernel is None:
+            self._advance_end(self._control_step(*inputs), rows)
+        else:
+            self._kernel.load(*inputs)
+
+    def _advance_end(self, out, rows: torch.Tensor) -> None:
+        """The step's results ``out`` (:class:`~.chain.TaskStep`) into the live rows."""
         ended_start = rows & self._start_failed
         live = rows & ~self._start_failed
-        out = self._control_step(self.nu, self.y, self.u, a, self.disturbance, self.noise,
-                                 self.par)
         nu, y, u, tension, tension_min, derivative, reward, comps, cost, code, obs = out
         lc = live[:, None]
-        self.nu = torch.where(live, nu, self.nu)
-        self.y = torch.where(lc, y, self.y)
-        self.u = torch.where(lc, u, self.u)
-        self.tension = torch.where(lc, tension, self.tension)
-        self.tension_min = torch.where(lc, tension_min, self.tension_min)
-        self.derivative = torch.where(lc, derivative, self.derivative)
-        self.reward = torch.where(live, reward, self.reward)
-        self.components = torch.where(lc, comps, self.components)
-        self.cost = torch.where(lc, cost, self.cost)  # a failed start's last step keeps 0
-        self.failure = torch.where(live, code, self.failure)
-        self.failure = torch.where(ended_start, self._start_code, self.failure)
-        self.obs = torch.where(lc, obs, self.obs)
-        self.steps = self.steps + rows.to(torch.int64)
-        self._start_failed = self._start_failed & ~rows
+        for mine, new, mask in ((self.nu, nu, live), (self.y, y, lc), (self.u, u, lc),
+                                (self.tension, tension, lc),
+                                (self.tension_min, tension_min, lc),
+                                (self.derivative, derivative, lc), (self.reward, reward, live),
+                                (self.components, comps, lc),
+                                (self.cost, cost, lc),  # a failed start's last step keeps 0
+                                (self.failure, code, live)):
+            torch.where(mask, new, mine, out=mine)
+        torch.where(ended_start, self._start_code, self.failure, out=self.failure)
+        torch.where(lc, obs, self.obs, out=self.obs)
+        self.steps.add_(rows.to(torch.int64))
+        self._start_failed &= ~rows
 
     # ------------------------------------------------------------------ #
     def info(self) -> dict[str, torch.Tensor]:

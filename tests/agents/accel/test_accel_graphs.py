@@ -222,6 +222,87 @@ def test_the_rollouts_pieces_replay_as_called(device):
     assert out[0][8].sum() > 0 and int(out[0][10]) == 0
 
 
+def _env_backends(device):
+    if device == "cpu":
+        return ["torch", "numba"]
+    from tether_gym_agents.accel import numba_cuda
+
+    try:
+        numba_cuda.load_cuda()
+    except ImportError:
+        return ["torch"]
+    return ["torch", "numba-cuda"]
+
+
+@pytest.mark.parametrize("device", DEVICES)
+def test_the_envs_step_parts_replay_as_its_step(device):
+    """The env's same-step autoreset step as :class:`RolloutStep` runs it (a graph
+    before the kernel, one after it with a numba backend, the autoreset eager): 40 steps
+    of short episodes with disturbance and noise drawn, several resets after the
+    capture, give the observations, rewards, flags, costs, last observations and
+    failure codes of ``env.step`` (bitwise on the CPU), and the same generator state.
+    On a GPU, through CUDA's capture, without the disturbance and noise."""
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05, "disturbance": 0.1,
+              "obs_noise": 0.001, "init_theta_range": 0.15}
+    if device != "cpu":  # a CUDA graph may draw other numbers than eager code: no draws
+        kwargs.update(disturbance=0.0, obs_noise=0.0)
+    g = torch.Generator().manual_seed(5)
+    actions = [torch.rand((6, 2), generator=g) * 2.0 - 1.0 for _ in range(40)]
+    for backend in _env_backends(device):
+        runs = []
+        for graphed in (False, True):
+            env = TorchTetherVecEnv(6, device=device, seed=11, autoreset_mode="same_step",
+                                    check_actions=False, backend=backend, full_info=False,
+                                    **kwargs)
+            env.reset()
+            begin = GraphedCall(env.step_begin, _capture(device), (env.generator,))
+            end = GraphedCall(env.step_end, _capture(device))
+            seen = []
+            for a in actions:
+                if graphed:
+                    env.action_in.copy_(a.to(device))
+                    begin()
+                    env.step_kernel()
+                    if backend != "torch":
+                        end()
+                    env.step_autoreset()
+                    o = env.outputs
+                    out = (env.obs, o.reward, o.terminated, o.truncated, o.cost,
+                           o.final_obs, o.final_failure)
+                else:
+                    obs, rew, term, trunc, info = env.step(a.to(device))
+                    cost = torch.stack([info[k] for k in ("cost", "cost_slack",
+                                                          "cost_length", "cost_tumble")], 1)
+                    out = (obs, rew, term, trunc, cost, info["final_obs"],
+                           info["final_failure"])
+                seen.append([x.clone() for x in out])
+            if graphed:
+                assert begin.captured and (end.captured or backend == "torch")
+            runs.append((seen, env.generator.get_state()))
+        (eager, state_e), (graph, state_g) = runs
+        assert sum(int(step[2].sum() + step[3].sum()) for step in eager[WARMUP_STEPS + 1:]) >= 6
+        for step_e, step_g in zip(eager, graph, strict=True):
+            for x, y in zip(step_e, step_g, strict=True):
+                assert x.dtype == y.dtype and _same(x, y, device)
+        if device == "cpu":
+            assert torch.equal(state_e, state_g)
+
+
+def test_the_step_parts_need_same_step_autoreset():
+    """The parts are the same-step autoreset step's; RolloutStep refuses another."""
+    from tether_gym_agents.accel.graphs import RolloutStep
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    env = TorchTetherVecEnv(2)
+    env.reset()
+    with pytest.raises(RuntimeError, match="same_step"):
+        env.step_begin()
+    with pytest.raises(ValueError, match="same_step"):
+        RolloutStep(None, env)
+
+
 def test_a_replay_whose_inputs_moved_is_refused():
     """A rollout in new storage after the capture would be read stale by a replay."""
     settings, policy, opt, lr = _learner(fused=True)
@@ -278,11 +359,14 @@ def test_the_cpus_default_adam_cannot_be_captured():
         step(policy, opt, lr, settings, batch.tensors(), idx)
 
 
-def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch):
-    """``train_seeds`` with every graph of ``--cuda-graphs`` (the rollout's two halves,
-    its advantages, the minibatch step), captured and replayed through RecordingCapture
-    on the CPU: five iterations, each piece captured after its warm-up, end with bitwise
-    the eager run's weights, statistics and episode counts. Both runs use the CPU's fused
+@pytest.mark.parametrize("backend", ["numba", "torch"])
+def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, backend):
+    """``train_seeds`` with every graph of ``--cuda-graphs`` (the rollout step, the env's
+    step included: one graph before the env's kernel, with the numba backend one after
+    it, one after the autoreset; the advantages; the minibatch step), captured and
+    replayed through RecordingCapture on the CPU: five iterations, each piece captured
+    after its warm-up, episodes ending and reset between replays, end with bitwise the
+    eager run's weights, statistics and episode counts. Both runs use the CPU's fused
     Adam, which keeps its step count on the device as CUDA's capturable Adam does."""
     from tether_gym_agents.accel import graphs
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
@@ -295,9 +379,9 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch):
     captures = []
     real_capture = RecordingCapture.capture
 
-    def counted_capture(self, fn):
+    def counted_capture(self, fn, generators=()):
         captures.append(fn)
-        return real_capture(self, fn)
+        return real_capture(self, fn, generators)
 
     monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
     settings = PPOSettings(n_envs=4, n_steps=8, batch_size=16, n_epochs=2,
@@ -305,13 +389,16 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch):
     summaries, weights = [], []
     for graphed in (False, True):
         out = tmp_path / ("graphed" if graphed else "eager")
-        # episodes of about 13 steps: truncations, bootstraps and restarts in the run
-        env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05}
+        # episodes of about 13 steps: truncations, bootstraps and restarts in the run; the
+        # disturbance and the noise are drawn inside the first graph of the step
+        env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05, "disturbance": 0.1,
+                      "obs_noise": 0.001}
         run = GpuRun([0, 1], 5 * 8 * 4, env_kwargs, out, torch.device("cpu"),
-                     checkpoints=5, eval_episodes=2, backend="numba", cuda_graphs=graphed)
+                     checkpoints=5, eval_episodes=2, backend=backend, cuda_graphs=graphed)
         summaries.append(train_seeds(settings, run, log=None))
         weights.append([load_agent(out / f"seed_{k}") for k in (0, 1)])
-    assert len(captures) == 4  # act, observe, finish, one minibatch shape
+    # the step's 3 graphs (2 with the torch backend), finish, one minibatch shape
+    assert len(captures) == (5 if backend == "numba" else 4)
     eager, graphed = summaries
     assert sum(sum(h["episodes"]) for h in eager["history"]) >= 10
     for key in ("episodes", "failed", "mean_return"):
