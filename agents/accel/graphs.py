@@ -4,12 +4,16 @@ On a GPU, each piece of an iteration of ``train.py gpu`` is tens to hundreds of 
 kernels. Their launches, not their arithmetic, set its time: ``bench/accel_ops.py``
 counts them. A CUDA graph records the kernels of a piece once, and each later call is
 then one launch of the whole graph ("CUDA Graphs" in PyTorch's CUDA semantics notes:
-warm-up on a side stream, capture with ``torch.cuda.graph``, replay). Four pieces are
-captured: the two halves of a rollout step around the env's step
-(:meth:`~.rollout.Rollout.act`, :meth:`~.rollout.Rollout.observe`), the advantages
-(:meth:`~.rollout.Rollout.finish`) and the minibatch step
-(:func:`~.trainer._minibatch_step`). The env's step stays eager: its autoreset
-branches on the host. What a graph needs from a piece, they provide:
+warm-up on a side stream, capture with ``torch.cuda.graph``, replay). Captured are the
+rollout step with the env's step (:class:`RolloutStep`: the policy's half
+:meth:`~.rollout.Rollout.act` with the env's draws and, on the torch backend, its whole
+step; on a numba backend the kernel's results into the state; the learner's half
+:meth:`~.rollout.Rollout.observe`; each reset attempt of the autoreset), the
+advantages (:meth:`~.rollout.Rollout.finish`) and the minibatch step
+(:func:`~.trainer._minibatch_step`). What stays eager: the numba backends' kernel
+launches (numba launches them, not torch) and the autoreset's host syncs (whether any
+sub-env ended, whether any start must be drawn again), which decide what runs next.
+What a graph needs from a piece, they provide:
 
 * no host sync: the distributions skip their argument checks, and nothing reads a
   tensor back to the host;
@@ -18,9 +22,11 @@ branches on the host. What a graph needs from a piece, they provide:
   The action samples are drawn inside the graph (CUDA graphs replay torch's random
   draws with fresh numbers);
 * fixed inputs: the rollout's state and buffers (:class:`~.rollout.Rollout`, its step
-  index ``t`` included), the learning rates, the normalisation statistics and the
-  weights stay in the same storage for the whole run and are updated in place, so that
-  every replay reads the new values where the capture found the old ones.
+  index ``t`` included), the env's state and outputs
+  (:class:`~.vec_env.TorchTetherVecEnv`), the learning rates, the normalisation
+  statistics and the weights stay in the same storage for the whole run and are updated
+  in place, so that every replay reads the new values where the capture found the old
+  ones. The env's generator is registered with the graphs that draw from it.
 
 Adam must be built with ``capturable=True`` (the trainer does that when asked for
 graphs). The warm-up calls are ordinary calls: nothing is run twice, and nothing is
@@ -276,17 +282,22 @@ class RolloutStep:
        torch backend the whole step, with a numba backend the copies into its rows);
     2. ``step_kernel``: a numba backend's one kernel launch (nothing with torch);
     3. ``step_end`` (a numba backend's rows into the state; nothing with torch);
-    4. ``step_autoreset``: one host sync; in a step where an episode ended, the
-       reset's draws and start;
+    4. ``step_autoreset``: one host sync; in a step where an episode ended, a reset
+       attempt or more, each ``reset_begin`` (the draws of a start for every row; with
+       the torch backend its evaluation and its copy into the ended rows),
+       ``reset_kernel`` (a numba backend's evaluation), ``reset_end`` (a numba
+       backend's copy into the ended rows) and one host sync (whether a start failed);
     5. the env's outputs into :meth:`~.rollout.Rollout.take`, and
        :meth:`~.rollout.Rollout.observe`.
 
     This is what ``act``, ``env.step``, ``take`` and ``observe`` compute in turn (the
     env's ``step`` is made of the same parts), without ``step``'s copies of what it
-    returns. With ``graphs``, 1, 3 (numba backends only) and 5 are each captured as a
-    graph after their warm-up calls and replayed (:class:`GraphedCall`); 2 and 4 stay
-    eager. A step then costs the host 2 graph launches and a sync (torch backend), or 3
-    launches, a kernel and a sync (numba), against about 120 to 1,600 operations eager.
+    returns. With ``graphs``, 1, 3, 5, ``reset_begin`` and ``reset_end`` (the last two
+    only with a numba backend) are each captured as a graph after their warm-up calls
+    and replayed (:class:`GraphedCall`); the kernels and the host syncs stay eager. A
+    step then costs the host 2 graph launches and a sync (torch backend), or 3
+    launches, a kernel and a sync (numba), plus 1 or 2 launches, a kernel and a sync per
+    reset attempt, against about 220 to 1,600 operations eager (bench/accel_ops.py).
 
     Parameters
     ----------
@@ -317,18 +328,24 @@ class RolloutStep:
             rollout.take(env.obs, o.reward, o.terminated, o.truncated, o.final_obs)
             rollout.observe()
 
+        numba = env.backend != "torch"
         self._act: Callable[[], None] = act
-        self._end: Callable[[], None] | None = env.step_end if env.backend != "torch" else None
+        self._end: Callable[[], None] | None = env.step_end if numba else None
         self._observe: Callable[[], None] = observe
+        self._reset_begin: Callable[[], None] | None = None  # None: the env's own
+        self._reset_end: Callable[[], None] | None = None
         self.parts: list[GraphedCall] = []
         if graphs:
             capture = CudaCapture() if capture is None else capture
-            self._act = GraphedCall(act, capture, (env.generator,))
+            draws = (env.generator,)
+            self._act = GraphedCall(act, capture, draws)
             self._observe = GraphedCall(observe, capture)
-            self.parts = [self._act, self._observe]
-            if self._end is not None:
-                self._end = GraphedCall(self._end, capture)
-                self.parts.insert(1, self._end)
+            self._reset_begin = GraphedCall(env.reset_begin, capture, draws)
+            self.parts = [self._act, self._observe, self._reset_begin]
+            if numba:
+                self._end = GraphedCall(env.step_end, capture)
+                self._reset_end = GraphedCall(env.reset_end, capture)
+                self.parts += [self._end, self._reset_end]
 
     @property
     def captured(self) -> bool:
@@ -342,5 +359,5 @@ class RolloutStep:
         env.step_kernel()
         if self._end is not None:
             self._end()
-        env.step_autoreset()
+        env.step_autoreset(self._reset_begin, self._reset_end)
         self._observe()

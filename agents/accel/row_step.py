@@ -104,13 +104,25 @@ class RowStep:
         ``u`` = clip(l' / max_reel_rate, -1, 1), ``tension`` and ``tension_min`` (T^),
         ``derivative`` (dy/dnu) and the observation ``obs`` (with ``noise``).
         """
+        self.load_reset(nu, y, noise, par)
+        self.launch_reset()
+        return {key: value.clone() for key, value in self.reset_result().items()}
+
+    def load_reset(self, nu, y, noise, par) -> None:
+        """Copy a reset evaluation's inputs into the rows (torch copies)."""
         r = self.rows
         for dst, src in ((r.nu, nu), (r.y, y), (r.noise, noise), (r.par, par)):
             dst.copy_(src)
+
+    def launch_reset(self) -> None:
+        """Run the row code's reset evaluation on the loaded rows."""
         self._launch(True)
-        return {"u": r.command.clone(), "tension": r.tension.clone(),
-                "tension_min": r.tension_min.clone(), "derivative": r.derivative.clone(),
-                "obs": r.obs.clone()}
+
+    def reset_result(self) -> dict[str, torch.Tensor]:
+        """:meth:`evaluate`'s results after :meth:`launch_reset`, as views of the rows."""
+        r = self.rows
+        return {"u": r.command, "tension": r.tension, "tension_min": r.tension_min,
+                "derivative": r.derivative, "obs": r.obs}
 
 
 class NumbaCpuStep(RowStep):

@@ -10,6 +10,7 @@ line-by-line port of the numba step tested equal to it (tests/agents/accel/).
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -179,6 +180,18 @@ class TorchTetherVecEnv:
     ``next_step`` (a failure's last step costs >= 1), not the reset's zeros; the other
     ``info`` entries are the reset's.
 
+    ## The step's parts (for CUDA graphs)
+
+    With ``"same_step"``, ``step`` is :meth:`step_begin` (the draws; the torch backend's
+    whole step), :meth:`step_kernel` (a numba backend's launch), :meth:`step_end` (its
+    results into the state) and :meth:`step_autoreset` (a host sync, then reset
+    attempts of :meth:`reset_begin`, :meth:`reset_kernel`, :meth:`reset_end` and a
+    sync each), reading the actions from ``action_in`` and leaving the step's outputs
+    in ``outputs`` (:class:`StepOutputs`) and ``obs``. Every tensor of the env stays in
+    the storage it was made in, updated in place, so that a learner can capture the
+    parts without a host sync or a numba launch as CUDA graphs and replay them
+    (:class:`~.graphs.RolloutStep`); ``step`` itself returns copies.
+
     ## Starting state
 
     As the single env's, drawn by torch: e, the masses, (theta, theta', l) from
@@ -305,6 +318,8 @@ class TorchTetherVecEnv:
         # the step's input and its rows, and the same-step outputs (see the step's parts)
         self.action_in = z(num, n)
         self._rows = torch.ones(num, dtype=torch.bool, device=self.device)
+        self._pending = torch.zeros(num, dtype=torch.bool, device=self.device)  # to reset
+        self._attempt: dict[str, torch.Tensor] = {}  # a reset attempt's starts
         self.outputs = StepOutputs(
             reward=z(num), cost=z(num, len(COST_NAMES)),
             terminated=torch.zeros(num, dtype=torch.bool, device=self.device),
@@ -364,7 +379,16 @@ class TorchTetherVecEnv:
         the reset's evaluation (dy/dnu and T^ with the reels holding their rate), the
         observation and the command u = clip(l' / max_reel_rate, -1, 1).
         """
-        plan, cc, n = self._plan, self.cc, self.n
+        inp = self._start_inputs(draws)
+        if self._kernel is None:
+            out = self._evaluate(inp)
+        else:
+            out = self._kernel.evaluate(inp["nu"], inp["y"], inp["noise"], inp["par"])
+        return self._start_result(inp, out)
+
+    def _start_inputs(self, draws: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """:meth:`start` before the evaluation: nu0, y, parameter and noise rows, l'."""
+        plan, n = self._plan, self.n
         unit = draws["unit"]
         count = unit.shape[0]
         if plan.randomised:
@@ -393,18 +417,25 @@ class TorchTetherVecEnv:
         y = torch.cat([start, dlength], dim=1)
         noise = (self._bias.expand(count, -1) if draws["gauss"] is None
                  else plan.obs_noise * draws["gauss"] + self._bias)
-        if self._kernel is not None:
-            out = self._kernel.evaluate(nu0, y, noise, par)
-        else:
-            _, res = chain.advance(nu0, y, dlength, torch.zeros_like(length), par, cc, 0)
-            u = torch.clamp(dlength / cc.max_reel_rate, -1.0, 1.0)
-            out = {"u": u, "tension": res.tension, "tension_min": res.tension_min,
-                   "derivative": res.derivative,
-                   "obs": chain.observation(nu0, y, noise, par, u, cc)}
+        return {"nu": nu0, "y": y, "par": par, "noise": noise, "dlength": dlength}
+
+    def _evaluate(self, inp: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The torch backend's reset evaluation of the starts ``inp`` (:meth:`_start_inputs`)."""
+        cc, nu0, y, par, dlength = self.cc, inp["nu"], inp["y"], inp["par"], inp["dlength"]
+        _, res = chain.advance(nu0, y, dlength, torch.zeros_like(dlength), par, cc, 0)
+        u = torch.clamp(dlength / cc.max_reel_rate, -1.0, 1.0)
+        return {"u": u, "tension": res.tension, "tension_min": res.tension_min,
+                "derivative": res.derivative,
+                "obs": chain.observation(nu0, y, inp["noise"], par, u, cc)}
+
+    def _start_result(self, inp: dict[str, torch.Tensor],
+                      out: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The starts ``inp`` and their evaluation ``out``, with ``nu_end`` and ``ok``."""
+        y = inp["y"]
         ok = ((y > self._state_low) & (y < self._state_high)).all(dim=1)
         ok &= ((out["tension"] > 0.0) & (out["tension"] < math.inf)).all(dim=1)
-        return {"nu": nu0, "y": y, "par": par, "noise": noise,
-                "nu_end": nu0 + plan.episode_length, "ok": ok, **out}
+        return {"nu": inp["nu"], "y": y, "par": inp["par"], "noise": inp["noise"],
+                "nu_end": inp["nu"] + self._plan.episode_length, "ok": ok, **out}
 
     def _param_rows(self, ecc: torch.Tensor, masses: torch.Tensor) -> torch.Tensor:
         """Parameter rows for e (B,) and masses (B, n) (``pack_params`` of ``tail_masses``)."""
@@ -416,18 +447,59 @@ class TorchTetherVecEnv:
         par[:, sl["tail_mass"]] = tail
         return par
 
-    def _reset_rows(self, mask: torch.Tensor) -> None:
-        """Draw and start the rows of ``mask``, drawing failed starts again (<= 1000 times)."""
-        pending = mask
+    def _reset_rows(self, mask: torch.Tensor, begin: Callable[[], None] | None = None,
+                    end: Callable[[], None] | None = None) -> None:
+        """Draw and start the rows of ``mask``, drawing failed starts again (<= 1000 times).
+
+        Each attempt is :meth:`reset_begin`, :meth:`reset_kernel`, :meth:`reset_end`
+        (``begin`` and ``end``: the same, captured as graphs), then one host sync.
+        """
+        begin = self.reset_begin if begin is None else begin
+        end = self.reset_end if end is None else end
+        self._pending.copy_(mask)
+        failed = True
         for _ in range(MAX_RESET_DRAWS):
-            s = self.start(self.draws(self.num_envs))
-            self._write_start(pending, s)  # a row whose every draw fails keeps its last
-            pending = pending & ~s["ok"]
-            if not bool(pending.any()):
+            begin()
+            self.reset_kernel()
+            end()
+            if not bool(self._pending.any()):
+                failed = False
                 break
-        torch.where(mask, pending, self._start_failed, out=self._start_failed)
-        if bool(pending.any()):
-            torch.where(pending, self._start_failure(), self._start_code, out=self._start_code)
+        torch.where(mask, self._pending, self._start_failed, out=self._start_failed)
+        if failed:
+            torch.where(self._pending, self._start_failure(), self._start_code,
+                        out=self._start_code)
+
+    # A reset attempt's parts, as a step's: reset_begin and reset_end can be captured as
+    # graphs (RolloutStep does), reset_kernel is a numba backend's launch.
+    def reset_begin(self) -> None:
+        """A reset attempt's first part: draw a start for every row.
+
+        With the torch backend, evaluate it and write it into the rows still pending
+        (``reset_end``'s work); with a numba backend, copy it into the kernel's rows.
+        """
+        self._attempt = self._start_inputs(self.draws(self.num_envs))
+        if self._kernel is None:
+            self._write_attempt(self._evaluate(self._attempt))
+        else:
+            a = self._attempt
+            self._kernel.load_reset(a["nu"], a["y"], a["noise"], a["par"])
+
+    def reset_kernel(self) -> None:
+        """A reset attempt's numba kernel launch (nothing with the torch backend)."""
+        if self._kernel is not None:
+            self._kernel.launch_reset()
+
+    def reset_end(self) -> None:
+        """A reset attempt's last part with a numba backend: the start into the rows."""
+        if self._kernel is not None:
+            self._write_attempt(self._kernel.reset_result())
+
+    def _write_attempt(self, out: dict[str, torch.Tensor]) -> None:
+        """The attempt's start into the pending rows; the rows whose start is good leave."""
+        s = self._start_result(self._attempt, out)
+        self._write_start(self._pending, s)  # a row whose every draw fails keeps its last
+        self._pending &= ~s["ok"]
 
     def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
         """Copy the start ``s`` into the rows of the mask ``rows`` (in place)."""
@@ -522,10 +594,14 @@ class TorchTetherVecEnv:
             self._advance_end(self._kernel.result(), self._rows)
             self._same_step_outputs()
 
-    def step_autoreset(self) -> None:
-        """Last part: reset the rows that ended (a host sync; draws only when one did)."""
+    def step_autoreset(self, begin: Callable[[], None] | None = None,
+                       end: Callable[[], None] | None = None) -> None:
+        """Last part: reset the rows that ended (a host sync; draws only when one did).
+
+        ``begin``, ``end``: :meth:`reset_begin` and :meth:`reset_end` captured as graphs.
+        """
         if bool(self.outputs.ended.any()):
-            self._reset_rows(self.outputs.ended)
+            self._reset_rows(self.outputs.ended, begin, end)
 
     def _same_step_outputs(self) -> None:
         """The step's flags, reward, cost and last observations into :attr:`outputs`."""

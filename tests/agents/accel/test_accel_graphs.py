@@ -237,19 +237,20 @@ def _env_backends(device):
 @pytest.mark.parametrize("device", DEVICES)
 def test_the_envs_step_parts_replay_as_its_step(device):
     """The env's same-step autoreset step as :class:`RolloutStep` runs it (a graph
-    before the kernel, one after it with a numba backend, the autoreset eager): 40 steps
-    of short episodes with disturbance and noise drawn, several resets after the
-    capture, give the observations, rewards, flags, costs, last observations and
+    before the kernel, one after it with a numba backend; the autoreset's attempts the
+    same way, its host syncs eager): 60 steps of 6-step episodes with disturbance and
+    noise drawn, half the rows out of step with the others (20 resets, the last 17 run
+    by replays), give the observations, rewards, flags, costs, last observations and
     failure codes of ``env.step`` (bitwise on the CPU), and the same generator state.
     On a GPU, through CUDA's capture, without the disturbance and noise."""
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
-    kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05, "disturbance": 0.1,
+    kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
               "obs_noise": 0.001, "init_theta_range": 0.15}
     if device != "cpu":  # a CUDA graph may draw other numbers than eager code: no draws
         kwargs.update(disturbance=0.0, obs_noise=0.0)
     g = torch.Generator().manual_seed(5)
-    actions = [torch.rand((6, 2), generator=g) * 2.0 - 1.0 for _ in range(40)]
+    actions = [torch.rand((6, 2), generator=g) * 2.0 - 1.0 for _ in range(60)]
     for backend in _env_backends(device):
         runs = []
         for graphed in (False, True):
@@ -257,8 +258,13 @@ def test_the_envs_step_parts_replay_as_its_step(device):
                                     check_actions=False, backend=backend, full_info=False,
                                     **kwargs)
             env.reset()
-            begin = GraphedCall(env.step_begin, _capture(device), (env.generator,))
+            # half the rows half an episode ahead: each reset is of other rows than the last
+            env.nu[::2] += env._plan.episode_length / 2
+            draws = (env.generator,)
+            begin = GraphedCall(env.step_begin, _capture(device), draws)
             end = GraphedCall(env.step_end, _capture(device))
+            reset_begin = GraphedCall(env.reset_begin, _capture(device), draws)
+            reset_end = GraphedCall(env.reset_end, _capture(device))
             seen = []
             for a in actions:
                 if graphed:
@@ -267,7 +273,7 @@ def test_the_envs_step_parts_replay_as_its_step(device):
                     env.step_kernel()
                     if backend != "torch":
                         end()
-                    env.step_autoreset()
+                    env.step_autoreset(reset_begin, reset_end)
                     o = env.outputs
                     out = (env.obs, o.reward, o.terminated, o.truncated, o.cost,
                            o.final_obs, o.final_failure)
@@ -279,10 +285,13 @@ def test_the_envs_step_parts_replay_as_its_step(device):
                            info["final_failure"])
                 seen.append([x.clone() for x in out])
             if graphed:
-                assert begin.captured and (end.captured or backend == "torch")
+                assert begin.captured and reset_begin.captured
+                assert (end.captured and reset_end.captured) or backend == "torch"
             runs.append((seen, env.generator.get_state()))
         (eager, state_e), (graph, state_g) = runs
-        assert sum(int(step[2].sum() + step[3].sum()) for step in eager[WARMUP_STEPS + 1:]) >= 6
+        ends = [step[2] | step[3] for step in eager]
+        assert sum(int(e.any()) for e in ends) >= 3 * WARMUP_STEPS
+        assert any(e.any() and not e.all() for e in ends[2 * WARMUP_STEPS:])
         for step_e, step_g in zip(eager, graph, strict=True):
             for x, y in zip(step_e, step_g, strict=True):
                 assert x.dtype == y.dtype and _same(x, y, device)
@@ -389,16 +398,18 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, b
     summaries, weights = [], []
     for graphed in (False, True):
         out = tmp_path / ("graphed" if graphed else "eager")
-        # episodes of about 13 steps: truncations, bootstraps and restarts in the run; the
-        # disturbance and the noise are drawn inside the first graph of the step
-        env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.05, "disturbance": 0.1,
+        # episodes of 6 steps: truncations, bootstraps and restarts in the run (the resets
+        # captured at their 4th attempt, replayed from the 5th); the disturbance and the
+        # noise are drawn inside the first graph of the step
+        env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
                       "obs_noise": 0.001}
         run = GpuRun([0, 1], 5 * 8 * 4, env_kwargs, out, torch.device("cpu"),
                      checkpoints=5, eval_episodes=2, backend=backend, cuda_graphs=graphed)
         summaries.append(train_seeds(settings, run, log=None))
         weights.append([load_agent(out / f"seed_{k}") for k in (0, 1)])
-    # the step's 3 graphs (2 with the torch backend), finish, one minibatch shape
-    assert len(captures) == (5 if backend == "numba" else 4)
+    # the step's 3 graphs and the reset's 2 (2 and 1 with the torch backend), finish,
+    # one minibatch shape
+    assert len(captures) == (7 if backend == "numba" else 5)
     eager, graphed = summaries
     assert sum(sum(h["episodes"]) for h in eager["history"]) >= 10
     for key in ("episodes", "failed", "mean_return"):
