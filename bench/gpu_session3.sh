@@ -7,8 +7,9 @@
 #      at 1e-9, starts, autoreset), failures with their size;
 #   3. env throughput at 65,536 and 1,048,576 envs: torch eager, numba-cuda, and the
 #      torch.compile'd core (bench/gpu_throughput.py);
-#   4. the CUDA graphs of the learner's pieces (agents/accel/graphs.py, written
-#      2026-12-07 without a device): their tests on the GPU, where CUDA's capture runs;
+#   4. the CUDA graphs of the learner's pieces and of the env's step and resets
+#      (agents/accel/graphs.py, written 2026-12-07 without a device): their tests on the
+#      GPU, where CUDA's capture runs;
 #   5. one seed of J (cfg/J.yml: ppo_fast's 64-step rollouts, 80 gradient steps and 1,343
 #      iterations with twice its envs and minibatch; on the CPU it tracks at half
 #      ppo_fast's error in 11M env steps: experiments/issue34/README.md) on the
@@ -20,12 +21,13 @@
 #      which ships J trained on the CPU (docs/gpu.md).
 #   Steps 5-6 time an iteration (128 x 64 = 8,192 env steps per seed): env steps per
 #   seed / 8,192 / wall time, from the checkpoint lines of the logs. bench/accel_ops.py
-#   counts about 34k torch operations per eager iteration on the numba-cuda backend, and
-#   about 6.5k launches from the host with --cuda-graphs; at the eager torch step's rate
-#   on the H200 of 2026-12-04 (about 15 us per operation) that is about 0.5 s and 0.1 s
-#   plus the replayed kernels' time, so 40 s buy about 80 of J's 1,343 iterations eager
-#   and at most about 400 graphed. The time per iteration with and without graphs, not
-#   the scores, is what these runs can tell (bench/README.md).
+#   counts about 34k torch operations per eager iteration on the numba-cuda backend (with
+#   CUDA's fused Adam), and about 780 launches from the host with --cuda-graphs (the
+#   env's step and resets graphed too); at the eager torch step's rate on the H200 of
+#   2026-12-04 (about 15 us per operation) that is about 0.5 s and 0.012 s, the latter
+#   plus the replayed kernels' own time on the GPU, which nothing has measured and which
+#   now decides: 40 s buy about 80 of J's 1,343 iterations eager. The time per iteration with and without
+#   graphs, not the scores, is what these runs can tell (bench/README.md).
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
 #   configs/gpu_ppo.yml) is left for a session with time to spare.

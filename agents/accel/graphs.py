@@ -76,8 +76,10 @@ class CudaCapture:
         from, registered with the graph so that each replay advances them.
         """
         graph = torch.cuda.CUDAGraph()
-        for generator in generators:
-            graph.register_generator_state(generator)
+        register = getattr(graph, "register_generator_state", None)
+        for generator in generators:  # torch builds that register lazily lack the method
+            if register is not None:
+                register(generator)
         with torch.cuda.graph(graph):
             fn()
         return graph.replay
