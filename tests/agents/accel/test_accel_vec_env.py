@@ -153,6 +153,34 @@ def test_without_full_info_a_step_returns_the_same_and_less_info(mode):
     assert ended > 0 and len(info_full) > len(info_lean)
 
 
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+def test_every_tensor_stays_in_its_storage(mode):
+    """What CUDA graphs of the env's parts need (tether_gym_agents.accel.graphs): after
+    steps, episode ends and resets, every tensor of the env is still the one it was
+    made as, at the same address, updated in place."""
+    env = TorchTetherVecEnv(8, device=DEVICE, seed=5, autoreset_mode=mode, backend=BACKEND,
+                            **{**TRAINING, "orbits_per_episode": 0.02})
+    env.reset()
+
+    def tensors():
+        out = {k: v for k, v in vars(env).items() if isinstance(v, torch.Tensor)}
+        out.update({f"outputs.{k}": v for k, v in env.outputs._asdict().items()})
+        return {k: (v, v.data_ptr()) for k, v in out.items()}
+
+    before = tensors()
+    assert {"nu", "y", "obs", "steps", "failure", "_pending", "outputs.final_obs"} <= set(before)
+    g = torch.Generator().manual_seed(2)
+    ended = 0
+    for _ in range(20):
+        _, _, term, trunc, _ = env.step(torch.rand((8, 2), generator=g).to(DEVICE) * 2 - 1)
+        ended += int((term | trunc).sum())
+    assert ended >= 8
+    after = tensors()
+    assert set(after) == set(before)
+    for key, (tensor, address) in before.items():
+        assert after[key][0] is tensor and after[key][1] == address, key
+
+
 def test_bad_input_is_refused():
     with pytest.raises(TypeError, match="full_info"):
         TorchTetherVecEnv(2, full_info="no")
