@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The next device session of issue 34 (prepared; about 10 minutes; no device was lent to
+# The next device session of issue 34 (prepared; about 11 minutes; no device was lent to
 # the sessions that wrote it): the numba-cuda backend (the numba env's own step compiled for
 # the GPU) against the torch port, on the GPU.
 #   1. numba-cuda compiles the step for the device (bench/numba_cuda_ptx.py);
@@ -15,6 +15,9 @@
 #      ppo_fast's error in 11M env steps: experiments/issue34/README.md) on the
 #      numba-cuda backend, 40 s of training (the learning rate falls to 0 at the time
 #      budget), eager, then the same with --cuda-graphs;
+#   5b. an iteration of J with --cuda-graphs timed part by part (bench/accel_iteration.py:
+#      the policy's half with the env's first part, the kernel, the autoreset, the
+#      learner's half, the advantages, the updates), each part between device syncs;
 #   6. ten seeds of J in one process, 150 s, with --cuda-graphs if step 5 wrote its
 #      graphed run (else eager), on the numba-cuda backend if step 5 wrote its eager run,
 #      else on the torch backend: the GPU-trained candidate for the `ppo_accel` row,
@@ -34,7 +37,7 @@
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
-#   bash bench/gpu_session3.sh train       # steps 4-6 (at most 440 s; about 5 minutes)
+#   bash bench/gpu_session3.sh train       # steps 4-6 (at most 500 s; about 6 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -66,6 +69,9 @@ for graphs in "" --cuda-graphs; do
       --out runs_gpu/single_J_numba_cuda${graphs:+_graphs}
   echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 done
+echo "== 5b. where a graphed iteration of J spends its time"
+timeout 60 python3 bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs \
+    --iterations 12 | tee $OUT/iteration3.json
 backend=torch
 [ -f runs_gpu/single_J_numba_cuda/seed_0/agent.json ] && backend=numba-cuda
 graphs=
