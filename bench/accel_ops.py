@@ -123,19 +123,17 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     adam_class = torch.optim.Adam
     real = (trainer._update, trainer.evaluate_on_device, adam_class.step,
             TorchTetherVecEnv.step, graph_module.CudaCapture,
-            graph_module.GraphedMinibatchStep.__call__, TorchTetherVecEnv.step_kernel,
+            trainer._minibatch_step, TorchTetherVecEnv.step_kernel,
             TorchTetherVecEnv.step_autoreset, NumbaCpuStep._launch,
             TorchTetherVecEnv.step_begin, TorchTetherVecEnv.step_end)
     adam = _in_phase(counter, "adam", real[2])
 
     def adam_step(self, *args, **kwargs):
-        if not graphs:
-            minibatches[0] += 1
         return adam(self, *args, **kwargs)
 
-    def graphed_step(self, *args, **kwargs):
+    def minibatch_step(*args, **kwargs):  # its Python runs eagerly or in a capture only
         minibatches[0] += 1
-        return real[5](self, *args, **kwargs)
+        return real[5](*args, **kwargs)
 
     def kernel(self, reset):
         counter.ops[counter.phase, "numba_kernel"] += 1
@@ -163,9 +161,9 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     NumbaCpuStep._launch = kernel
     TorchTetherVecEnv.step_begin = _in_phase(counter, "env", real[9])
     TorchTetherVecEnv.step_end = _in_phase(counter, "env", real[10])
+    trainer._minibatch_step = minibatch_step
     if graphs:
         graph_module.CudaCapture = CountedCapture
-        graph_module.GraphedMinibatchStep.__call__ = graphed_step
         torch.optim.Adam = lambda params, **kw: adam_class(params, **{**kw, "fused": True})
     try:
         with tempfile.TemporaryDirectory() as out, counter:
@@ -176,7 +174,7 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     finally:
         (trainer._update, trainer.evaluate_on_device, adam_class.step,
          TorchTetherVecEnv.step, graph_module.CudaCapture,
-         graph_module.GraphedMinibatchStep.__call__, TorchTetherVecEnv.step_kernel,
+         trainer._minibatch_step, TorchTetherVecEnv.step_kernel,
          TorchTetherVecEnv.step_autoreset, NumbaCpuStep._launch,
          TorchTetherVecEnv.step_begin, TorchTetherVecEnv.step_end) = real
         torch.optim.Adam = adam_class
@@ -199,7 +197,11 @@ def count(config: Path, backend: str, iterations: int, graphs: bool = False) -> 
     per_iteration.subtract(one.ops)
     phases = two.by_phase()
     phases.subtract(one.by_phase())
-    minibatches = (mb_two - mb_one) // iterations            # per iteration
+    if graphs:  # a replay runs no Python: the update's minibatch steps by their number
+        M = settings.n_steps * settings.n_envs
+        minibatches = settings.n_epochs * -(-M // min(settings.batch_size, M))
+    else:       # the minibatch steps the trainer called
+        minibatches = (mb_two - mb_one) // iterations    # per iteration
     per_env = phases["env"] / (iterations * settings.n_steps)
     per_step = phases["rollout"] / (iterations * settings.n_steps) + per_env
     per_update = phases["update"] / (iterations * minibatches)

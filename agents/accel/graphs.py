@@ -9,16 +9,16 @@ rollout step with the env's step (:class:`RolloutStep`: the policy's half
 :meth:`~.rollout.Rollout.act` with the env's draws and, on the torch backend, its whole
 step; on a numba backend the kernel's results into the state; the learner's half
 :meth:`~.rollout.Rollout.observe`; each reset attempt of the autoreset), the
-advantages (:meth:`~.rollout.Rollout.finish`) and the minibatch step
-(:func:`~.trainer._minibatch_step`). What stays eager: the numba backends' kernel
+advantages (:meth:`~.rollout.Rollout.finish`) and the update, every minibatch step of
+an iteration in one graph (:class:`GraphedUpdate`). What stays eager: the numba backends' kernel
 launches (numba launches them, not torch) and the autoreset's host syncs (whether any
 sub-env ended, whether any start must be drawn again), which decide what runs next.
 What a graph needs from a piece, they provide:
 
 * no host sync: the distributions skip their argument checks, and nothing reads a
   tensor back to the host;
-* no sort: the minibatch orders are drawn before the steps
-  (:func:`~.trainer._permutations`), and the step gets its rows ``idx`` as a tensor.
+* no sort: the minibatch orders are drawn before the update
+  (:func:`~.trainer._permutations`) and copied into a tensor that it reads.
   The action samples are drawn inside the graph (CUDA graphs replay torch's random
   draws with fresh numbers);
 * fixed inputs: the rollout's state and buffers (:class:`~.rollout.Rollout`, its step
@@ -46,7 +46,7 @@ from collections.abc import Callable
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 
-__all__ = ["GraphedCall", "GraphedMinibatchStep", "RolloutStep", "CudaCapture",
+__all__ = ["GraphedCall", "GraphedUpdate", "RolloutStep", "CudaCapture",
            "RecordingCapture"]
 
 WARMUP_STEPS = 3
@@ -232,44 +232,48 @@ class GraphedCall:
         self._replay()
 
 
-class GraphedMinibatchStep:
-    """``step(policy, opt, lr, settings, batch, idx)``: a :class:`GraphedCall` per idx shape.
+class GraphedUpdate:
+    """``steps(policy, opt, lr, settings, batch, orders)``: a whole update as one graph.
 
-    Each call copies its ``idx`` into a tensor fixed for its shape, which the step reads.
-    A call whose rollout, rates or weights are no longer where the first call of its
-    shape found them raises RuntimeError: a replay would read stale memory.
+    A drop-in for :func:`~.trainer._minibatch_steps` (every minibatch step of an update,
+    ``n_epochs`` passes over ``batch`` in the minibatch orders ``orders``): one
+    :class:`GraphedCall` per ``orders`` shape (one in training), which each call first
+    copies its ``orders`` into (they are drawn eagerly before, by
+    :func:`~.trainer._permutations`). A call whose rollout, rates or weights are no
+    longer where the first call found them raises RuntimeError: a replay would read
+    stale memory.
 
     Parameters
     ----------
-    step : callable
-        :func:`~.trainer._minibatch_step` (no host sync, no random draw).
+    steps : callable
+        :func:`~.trainer._minibatch_steps` (no host sync, no random draw).
     capture : CudaCapture or RecordingCapture, optional
         The graph API (default: :class:`CudaCapture`).
     """
 
-    def __init__(self, step: Callable, capture=None):
-        self._step = step
+    def __init__(self, steps: Callable, capture=None):
+        self._steps = steps
         self._capture = CudaCapture() if capture is None else capture
         self._graphs: dict[tuple, tuple] = {}
 
     @property
     def captured(self) -> int:
-        """How many graphs (minibatch shapes) are captured."""
+        """How many graphs (orders shapes) are captured."""
         return sum(call.captured for call, _, _ in self._graphs.values())
 
-    def __call__(self, policy, opt, lr, settings, batch: tuple, idx: torch.Tensor) -> None:
-        """One minibatch step: a warm-up, the capture, or a replay."""
-        key = tuple(idx.shape)
+    def __call__(self, policy, opt, lr, settings, batch: tuple, orders: torch.Tensor) -> None:
+        """One update: a warm-up, the capture, or a replay."""
+        key = tuple(orders.shape)
         if key not in self._graphs:
-            fixed_idx = idx.clone()
-            call = GraphedCall(lambda: self._step(policy, opt, lr, settings, batch, fixed_idx),
+            fixed = orders.clone()
+            call = GraphedCall(lambda: self._steps(policy, opt, lr, settings, batch, fixed),
                                self._capture)
-            self._graphs[key] = (call, fixed_idx, _addresses(batch, lr, opt))
-        call, fixed_idx, addresses = self._graphs[key]
+            self._graphs[key] = (call, fixed, _addresses(batch, lr, opt))
+        call, fixed, addresses = self._graphs[key]
         if _addresses(batch, lr, opt) != addresses:
-            raise RuntimeError("GraphedMinibatchStep: the rollout, learning rates or weights "
-                               "moved since the capture; refill them in place")
-        fixed_idx.copy_(idx)
+            raise RuntimeError("GraphedUpdate: the rollout, learning rates or weights moved "
+                               "since the capture; refill them in place")
+        fixed.copy_(orders)
         call()
 
 

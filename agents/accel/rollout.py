@@ -46,7 +46,7 @@ class RolloutBatch:
     """One iteration's samples per seed, flattened (S, T N, ...), in tensors kept for the run.
 
     The minibatch steps read them where they are: a captured CUDA graph
-    (:class:`~.graphs.GraphedMinibatchStep`) reads them again at every replay, so
+    (:class:`~.graphs.GraphedUpdate`) reads them again at every replay, so
     :meth:`fill` writes each rollout into the same storage.
     """
 

@@ -33,7 +33,7 @@ from ..files.run_folder import (
     write_train_info,
 )
 from ..files.safe_format import ObsNormalization, save_agent
-from .graphs import GraphedCall, GraphedMinibatchStep, RolloutStep
+from .graphs import GraphedCall, GraphedUpdate, RolloutStep
 from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
@@ -134,10 +134,10 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     rollout.start(raw)
     step = RolloutStep(rollout, env, graphs=run.cuda_graphs)  # the env's step included
     finish: Callable[[], None] = rollout.finish
-    minibatch_step: Callable[..., None] = _minibatch_step
+    minibatch_steps: Callable[..., None] = _minibatch_steps
     if run.cuda_graphs:  # each captured after its warm-up calls, then replayed
         finish = GraphedCall(finish)
-        minibatch_step = GraphedMinibatchStep(_minibatch_step)
+        minibatch_steps = GraphedUpdate(_minibatch_steps)
     per_rollout = T * N
     n_updates = max(1, math.ceil(timesteps / per_rollout))
     marks = sorted({max(1, round(n_updates * (i + 1) / checkpoints))
@@ -156,7 +156,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                 step()
             finish()
         steps += per_rollout
-        _update(policy, opt, lr, settings, rollout.batch, minibatch_step)
+        _update(policy, opt, lr, settings, rollout.batch, minibatch_steps)
         out_of_time = time.perf_counter() - t0 > max_seconds
         if update in marks or out_of_time:
             wall = time.perf_counter() - t0
@@ -308,16 +308,30 @@ def _minibatch_step(policy, opt, lr, settings: PPOSettings, batch: tuple, idx) -
                                              lr)).clamp(1e-5, 1e-2))
 
 
+def _minibatch_steps(policy, opt, lr, settings: PPOSettings, batch: tuple,
+                     orders: torch.Tensor) -> None:
+    """Every minibatch step of an update: a pass over ``batch`` per epoch, in ``orders``.
+
+    ``orders`` (epochs, S, M) holds each epoch's minibatch order per seed
+    (:func:`_permutations`); minibatches of ``batch_size`` rows (the last one shorter
+    when M is not a multiple of it). No host sync and no random draw: a CUDA graph can
+    capture it whole (:class:`~.graphs.GraphedUpdate`).
+    """
+    M = orders.shape[2]
+    bs = min(settings.batch_size, M)
+    for epoch in range(orders.shape[0]):
+        for start in range(0, M, bs):
+            _minibatch_step(policy, opt, lr, settings, batch, orders[epoch, :, start:start + bs])
+
+
 def _update(policy, opt, lr, settings: PPOSettings, batch: RolloutBatch,
-            step=_minibatch_step) -> None:
+            steps=_minibatch_steps) -> None:
     """``n_epochs`` passes of minibatch steps over ``batch``, per seed independent.
 
-    ``step`` is :func:`_minibatch_step` or its captured CUDA graph
-    (:class:`~.graphs.GraphedMinibatchStep`, same arguments).
+    The epochs' minibatch orders are drawn first (:func:`_permutations`), then ``steps``
+    (:func:`_minibatch_steps` or its captured CUDA graph, :class:`~.graphs.GraphedUpdate`,
+    same arguments) runs them.
     """
     S, M = batch.logp.shape
-    bs = min(settings.batch_size, M)
-    perms = _permutations(settings.n_epochs, S, M, batch.logp.device)
-    for epoch in range(settings.n_epochs):
-        for start in range(0, M, bs):
-            step(policy, opt, lr, settings, batch.tensors(), perms[epoch, :, start:start + bs])
+    orders = _permutations(settings.n_epochs, S, M, batch.logp.device)
+    steps(policy, opt, lr, settings, batch.tensors(), orders)

@@ -5,7 +5,7 @@ draws), fed through fixed inputs. The first is counted here with a dispatch mode
 second is checked by capturing and replaying through :class:`RecordingCapture`, which
 replays the recorded aten operations on the recorded tensors without running the
 Python again, as a CUDA graph does: the results must be the eager ones, bitwise, for
-the minibatch step, the rollout's pieces and a whole ``train_seeds`` run. CUDA's
+the update, the rollout's pieces, the env's step and a whole ``train_seeds`` run. CUDA's
 capture itself is run where torch sees a GPU (the device-parametrised tests and
 ``test_train_gpu_with_cuda_graphs_runs_on_a_gpu``), and skipped elsewhere (CI has none).
 """
@@ -24,13 +24,14 @@ from tether_gym_agents.accel.graphs import (  # noqa: E402
     WARMUP_STEPS,
     CudaCapture,
     GraphedCall,
-    GraphedMinibatchStep,
+    GraphedUpdate,
     RecordingCapture,
 )
 from tether_gym_agents.accel.ppo import MultiSeedPolicy, PPOSettings  # noqa: E402
 from tether_gym_agents.accel.rollout import Rollout, RolloutBatch  # noqa: E402
 from tether_gym_agents.accel.trainer import (  # noqa: E402
     _minibatch_step,
+    _minibatch_steps,
     _permutations,
     _update,
 )
@@ -144,27 +145,26 @@ def test_permutations_are_one_argsort_of_rand_per_epoch():
 
 
 @pytest.mark.parametrize("device", DEVICES)
-@pytest.mark.parametrize(("N", "schedule", "graphs"),
-                         [(8, "linear", 1), (9, "adaptive", 2)])
-def test_a_replayed_step_is_the_eager_step(N, schedule, graphs, device):
-    """Three iterations of ``_update`` on fresh rollouts: the graphed step leaves the
-    weights, Adam's moments and the rates as the eager step does (bitwise on the CPU).
-    With 9 envs x 4 steps the last minibatch of an epoch is 4 rows, not 8: a second
-    graph."""
+@pytest.mark.parametrize(("N", "schedule"), [(8, "linear"), (9, "adaptive")])
+def test_a_replayed_update_is_the_eager_update(N, schedule, device):
+    """Six iterations of ``_update`` on fresh rollouts, the last three by replays of the
+    graphed update (its 8 or 10 minibatch steps in one graph): the weights, Adam's
+    moments and the rates end as with the eager update (bitwise on the CPU). With 9
+    envs x 4 steps the last minibatch of an epoch is 4 rows, not 8."""
     T, S, d, a = 4, 2, 6, 2
     results = []
     for graphed in (False, True):
         settings, policy, opt, lr = _learner(schedule, fused=True, device=device)
-        step = GraphedMinibatchStep(_minibatch_step, _capture(device)) if graphed \
-            else _minibatch_step
+        steps = GraphedUpdate(_minibatch_steps, _capture(device)) if graphed \
+            else _minibatch_steps
         batch = RolloutBatch(T, S, N, d, a, device)
         g = torch.Generator().manual_seed(11)
         torch.manual_seed(7)
-        for _ in range(3):
+        for _ in range(WARMUP_STEPS + 3):
             batch.fill(*_rollout(g, T, S, N, d, a, device))
-            _update(policy, opt, lr, settings, batch, step)
+            _update(policy, opt, lr, settings, batch, steps)
         if graphed:
-            assert step.captured == graphs
+            assert steps.captured == 1
         moments = [opt.state[p][k] for p in policy.parameters() for k in ("exp_avg",
                                                                              "exp_avg_sq")]
         results.append([*(p.detach() for p in policy.parameters()), *moments, lr])
@@ -317,14 +317,14 @@ def test_a_replay_whose_inputs_moved_is_refused():
     settings, policy, opt, lr = _learner(fused=True)
     batch = RolloutBatch(4, 2, 8, 6, 2, "cpu")
     batch.fill(*_rollout(torch.Generator().manual_seed(0), 4, 2, 8, 6, 2))
-    step = GraphedMinibatchStep(_minibatch_step, RecordingCapture())
-    idx = _permutations(1, 2, 32, "cpu")[0, :, :8]
+    steps = GraphedUpdate(_minibatch_steps, RecordingCapture())
+    orders = _permutations(1, 2, 32, "cpu")
     for _ in range(WARMUP_STEPS + 1):
-        step(policy, opt, lr, settings, batch.tensors(), idx)
-    assert step.captured == 1
+        steps(policy, opt, lr, settings, batch.tensors(), orders)
+    assert steps.captured == 1
     moved = tuple(t.clone() for t in batch.tensors())
     with pytest.raises(RuntimeError, match="moved since the capture"):
-        step(policy, opt, lr, settings, moved, idx)
+        steps(policy, opt, lr, settings, moved, orders)
 
 
 def test_the_stand_in_keeps_a_graphs_rules():
@@ -360,23 +360,24 @@ def test_the_cpus_default_adam_cannot_be_captured():
     settings, policy, opt, lr = _learner()
     batch = RolloutBatch(4, 2, 8, 6, 2, "cpu")
     batch.fill(*_rollout(torch.Generator().manual_seed(0), 4, 2, 8, 6, 2))
-    step = GraphedMinibatchStep(_minibatch_step, RecordingCapture())
-    idx = _permutations(1, 2, 32, "cpu")[0, :, :8]
+    steps = GraphedUpdate(_minibatch_steps, RecordingCapture())
+    orders = _permutations(1, 2, 32, "cpu")
     for _ in range(WARMUP_STEPS):
-        step(policy, opt, lr, settings, batch.tensors(), idx)
+        steps(policy, opt, lr, settings, batch.tensors(), orders)
     with pytest.raises(RuntimeError, match="host sync"):
-        step(policy, opt, lr, settings, batch.tensors(), idx)
+        steps(policy, opt, lr, settings, batch.tensors(), orders)
 
 
 @pytest.mark.parametrize("backend", ["numba", "torch"])
 def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, backend):
     """``train_seeds`` with every graph of ``--cuda-graphs`` (the rollout step, the env's
     step included: one graph before the env's kernel, with the numba backend one after
-    it, one after the autoreset; the advantages; the minibatch step), captured and
-    replayed through RecordingCapture on the CPU: five iterations, each piece captured
-    after its warm-up, episodes ending and reset between replays, end with bitwise the
-    eager run's weights, statistics and episode counts. Both runs use the CPU's fused
-    Adam, which keeps its step count on the device as CUDA's capturable Adam does."""
+    it, one after the autoreset; the reset attempts; the advantages; the update),
+    captured and replayed through RecordingCapture on the CPU: five iterations, each
+    piece captured after its warm-up, episodes ending and reset between replays, end
+    with bitwise the eager run's weights, statistics and episode counts. Both runs use
+    the CPU's fused Adam, which keeps its step count on the device as CUDA's capturable
+    Adam does."""
     from tether_gym_agents.accel import graphs
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
     from tether_gym_agents.files.safe_format import load_agent
@@ -408,7 +409,7 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, b
         summaries.append(train_seeds(settings, run, log=None))
         weights.append([load_agent(out / f"seed_{k}") for k in (0, 1)])
     # the step's 3 graphs and the reset's 2 (2 and 1 with the torch backend), finish,
-    # one minibatch shape
+    # the update
     assert len(captures) == (7 if backend == "numba" else 5)
     eager, graphed = summaries
     assert sum(sum(h["episodes"]) for h in eager["history"]) >= 10
