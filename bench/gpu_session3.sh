@@ -25,12 +25,13 @@
 #   Steps 5-6 time an iteration (128 x 64 = 8,192 env steps per seed): env steps per
 #   seed / 8,192 / wall time, from the checkpoint lines of the logs. bench/accel_ops.py
 #   counts about 34k torch operations per eager iteration on the numba-cuda backend (with
-#   CUDA's fused Adam), and about 620 launches from the host with --cuda-graphs (the
-#   env's step, resets and whole update graphed too); at the eager torch step's rate on
-#   the H200 of 2026-12-04 (about 15 us per operation) that is about 0.5 s and 0.009 s, the latter
-#   plus the replayed kernels' own time on the GPU, which nothing has measured and which
-#   now decides: 40 s buy about 80 of J's 1,343 iterations eager. The time per iteration with and without
-#   graphs, not the scores, is what these runs can tell (bench/README.md).
+#   CUDA's fused Adam), and about 470 launches from the host with --cuda-graphs (the
+#   env's step, resets and whole update graphed too); at the eager torch step's rate
+#   on the H200 of 2026-12-04 (about 15 us per operation) that is about 0.5 s and
+#   0.007 s, the latter plus the replayed kernels' own time on the GPU, which nothing
+#   has measured and which now decides: 40 s buy about 80 of J's 1,343 iterations
+#   eager. The time per iteration with and without graphs, not the scores, is what
+#   these runs can tell (bench/README.md).
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
 #   configs/gpu_ppo.yml) is left for a session with time to spare.

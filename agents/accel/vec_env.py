@@ -319,6 +319,10 @@ class TorchTetherVecEnv:
         self.action_in = z(num, n)
         self._rows = torch.ones(num, dtype=torch.bool, device=self.device)
         self._pending = torch.zeros(num, dtype=torch.bool, device=self.device)  # to reset
+        # whether any row ended / any start is pending: reduced in the graphed parts, so
+        # that the host's branch costs it a read and no launch
+        self._any_ended = torch.zeros((), dtype=torch.bool, device=self.device)
+        self._any_pending = torch.zeros((), dtype=torch.bool, device=self.device)
         self._attempt: dict[str, torch.Tensor] = {}  # a reset attempt's starts
         self.outputs = StepOutputs(
             reward=z(num), cost=z(num, len(COST_NAMES)),
@@ -447,25 +451,27 @@ class TorchTetherVecEnv:
         par[:, sl["tail_mass"]] = tail
         return par
 
-    def _reset_rows(self, mask: torch.Tensor, begin: Callable[[], None] | None = None,
+    def _reset_rows(self, mask: torch.Tensor | None, begin: Callable[[], None] | None = None,
                     end: Callable[[], None] | None = None) -> None:
         """Draw and start the rows of ``mask``, drawing failed starts again (<= 1000 times).
 
-        Each attempt is :meth:`reset_begin`, :meth:`reset_kernel`, :meth:`reset_end`
-        (``begin`` and ``end``: the same, captured as graphs), then one host sync.
+        ``mask`` None: the rows already in ``_pending`` (a step's ended rows, which
+        :meth:`step_end` put there). Each attempt is :meth:`reset_begin`,
+        :meth:`reset_kernel`, :meth:`reset_end` (``begin`` and ``end``: the same,
+        captured as graphs), then one host sync.
         """
         begin = self.reset_begin if begin is None else begin
         end = self.reset_end if end is None else end
-        self._pending.copy_(mask)
+        if mask is not None:
+            self._pending.copy_(mask)
         failed = True
         for _ in range(MAX_RESET_DRAWS):
             begin()
             self.reset_kernel()
             end()
-            if not bool(self._pending.any()):
+            if not bool(self._any_pending):
                 failed = False
                 break
-        torch.where(mask, self._pending, self._start_failed, out=self._start_failed)
         if failed:
             torch.where(self._pending, self._start_failure(), self._start_code,
                         out=self._start_code)
@@ -499,7 +505,12 @@ class TorchTetherVecEnv:
         """The attempt's start into the pending rows; the rows whose start is good leave."""
         s = self._start_result(self._attempt, out)
         self._write_start(self._pending, s)  # a row whose every draw fails keeps its last
-        self._pending &= ~s["ok"]
+        still = self._pending & ~s["ok"]
+        # the attempt's rows start failed while their start is: after the last attempt, a
+        # reset row is marked failed when every one of its draws failed
+        torch.where(self._pending, still, self._start_failed, out=self._start_failed)
+        self._pending.copy_(still)
+        torch.any(self._pending, out=self._any_pending)
 
     def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
         """Copy the start ``s`` into the rows of the mask ``rows`` (in place)."""
@@ -600,8 +611,8 @@ class TorchTetherVecEnv:
 
         ``begin``, ``end``: :meth:`reset_begin` and :meth:`reset_end` captured as graphs.
         """
-        if bool(self.outputs.ended.any()):
-            self._reset_rows(self.outputs.ended, begin, end)
+        if bool(self._any_ended):
+            self._reset_rows(None, begin, end)
 
     def _same_step_outputs(self) -> None:
         """The step's flags, reward, cost and last observations into :attr:`outputs`."""
@@ -609,6 +620,8 @@ class TorchTetherVecEnv:
         torch.ne(self.failure, 0, out=o.terminated)
         torch.logical_and(self.steps_truncated(), ~o.terminated, out=o.truncated)
         torch.logical_or(o.terminated, o.truncated, out=o.ended)
+        torch.any(o.ended, out=self._any_ended)
+        self._pending.copy_(o.ended)  # the rows step_autoreset resets
         # the step's reward and cost, before a reset zeroes them
         for dst, src in ((o.reward, self.reward), (o.cost, self.cost),
                          (o.final_obs, self.obs), (o.final_failure, self.failure)):

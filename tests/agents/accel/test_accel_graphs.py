@@ -235,20 +235,26 @@ def _env_backends(device):
 
 
 @pytest.mark.parametrize("device", DEVICES)
-def test_the_envs_step_parts_replay_as_its_step(device):
+@pytest.mark.parametrize("failing", [False, True])
+def test_the_envs_step_parts_replay_as_its_step(device, failing, monkeypatch):
     """The env's same-step autoreset step as :class:`RolloutStep` runs it (a graph
     before the kernel, one after it with a numba backend; the autoreset's attempts the
     same way, its host syncs eager): 60 steps of 6-step episodes with disturbance and
     noise drawn, half the rows out of step with the others (20 resets, the last 17 run
     by replays), give the observations, rewards, flags, costs, last observations and
     failure codes of ``env.step`` (bitwise on the CPU), and the same generator state.
-    On a GPU, through CUDA's capture, without the disturbance and noise."""
+    ``failing``: every start of row 1 fails, and a start of row 4 whenever its first
+    angle is drawn positive, with 3 draws per reset: attempts repeated, rows starting
+    failed. On a GPU, through CUDA's capture: the draws inside a graph should be the
+    eager ones there too (a replay starts from the generator's offset and adds each
+    draw's increment in order, as eager code does), and this checks it."""
+    from tether_gym_agents.accel import vec_env
     from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
 
     kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
               "obs_noise": 0.001, "init_theta_range": 0.15}
-    if device != "cpu":  # a CUDA graph may draw other numbers than eager code: no draws
-        kwargs.update(disturbance=0.0, obs_noise=0.0)
+    if failing:
+        monkeypatch.setattr(vec_env, "MAX_RESET_DRAWS", 3)
     g = torch.Generator().manual_seed(5)
     actions = [torch.rand((6, 2), generator=g) * 2.0 - 1.0 for _ in range(60)]
     for backend in _env_backends(device):
@@ -257,6 +263,16 @@ def test_the_envs_step_parts_replay_as_its_step(device):
             env = TorchTetherVecEnv(6, device=device, seed=11, autoreset_mode="same_step",
                                     check_actions=False, backend=backend, full_info=False,
                                     **kwargs)
+            if failing:
+                real = env._start_result
+                rows = torch.arange(6, device=device)
+
+                def start_result(inp, out, real=real, rows=rows):
+                    s = real(inp, out)
+                    bad = (rows == 1) | ((rows == 4) & (inp["y"][:, 0] > 0.0))
+                    return {**s, "ok": s["ok"] & ~bad}
+
+                env._start_result = start_result
             env.reset()
             # half the rows half an episode ahead: each reset is of other rows than the last
             env.nu[::2] += env._plan.episode_length / 2

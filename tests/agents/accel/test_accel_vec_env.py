@@ -181,6 +181,45 @@ def test_every_tensor_stays_in_its_storage(mode):
         assert after[key][0] is tensor and after[key][1] == address, key
 
 
+def _failing_starts(env, rows, monkeypatch, draws=3):
+    """Make every start draw of ``rows`` fail, and allow ``draws`` draws per reset."""
+    from tether_gym_agents.accel import vec_env
+
+    monkeypatch.setattr(vec_env, "MAX_RESET_DRAWS", draws)
+    real = env._start_result
+
+    def failing(inp, out):
+        s = real(inp, out)
+        return {**s, "ok": s["ok"] & ~rows}
+
+    env._start_result = failing
+
+
+@pytest.mark.parametrize("mode", ["next_step", "same_step"])
+def test_a_row_whose_every_start_draw_fails_starts_failed(mode, monkeypatch):
+    """As the numba env: a row whose every draw fails (3 here) starts failed, with the
+    reason in ``info["failure"]`` from its reset on, and terminates at its first step
+    with reward 0 and that code; the other rows start and step as usual, and the
+    failed rows' later resets fail again."""
+    from tether_gym.tasks.termination import Failure
+
+    env = TorchTetherVecEnv(6, device=DEVICE, seed=4, autoreset_mode=mode, backend=BACKEND,
+                            **TRAINING)
+    bad = torch.tensor([False, True, False, False, True, False], device=DEVICE)
+    _failing_starts(env, bad, monkeypatch)
+    _, info = env.reset()
+    assert torch.equal(env._start_failed, bad)
+    assert (info["failure"][bad] == int(Failure.LENGTH)).all()
+    assert (info["failure"][~bad] == 0).all()
+    _, rew, term, trunc, info = env.step(torch.zeros((6, 2), device=DEVICE))
+    assert torch.equal(term, bad) and not trunc.any() and (rew[bad] == 0).all()
+    code = info["final_failure"] if mode == "same_step" else info["failure"]
+    assert (code[bad] == int(Failure.LENGTH)).all() and (code[~bad] == 0).all()
+    if mode == "next_step":  # the next step resets them, and their draws fail again
+        env.step(torch.zeros((6, 2), device=DEVICE))
+    assert torch.equal(env._start_failed, bad)
+
+
 def test_bad_input_is_refused():
     with pytest.raises(TypeError, match="full_info"):
         TorchTetherVecEnv(2, full_info="no")
