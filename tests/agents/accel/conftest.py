@@ -1,7 +1,9 @@
-"""The accel tests' shared helper: the equality tests run again through another backend."""
+"""The accel tests' shared helpers: the equality tests run again through another backend,
+bench/'s scripts loaded as modules, and a tiny ``train.py gpu`` config."""
 
 from __future__ import annotations
 
+import importlib.util
 import os
 import subprocess
 import sys
@@ -10,6 +12,39 @@ from pathlib import Path
 import pytest
 
 HERE = Path(__file__).parent
+ROOT = HERE.parents[2]
+
+TINY = """tether_gym/TetherLibration-v2:
+  n_envs: 8
+  n_steps: 16
+  batch_size: 48
+  n_epochs: 3
+  n_timesteps: 1000
+"""
+"""A ``train.py gpu`` config of 8 envs x 16 steps per rollout, 9 minibatch steps, 8
+iterations."""
+
+
+@pytest.fixture(scope="session")
+def load_bench():
+    """``load_bench(name)``: ``bench/<name>.py`` as a module (bench/ holds scripts, not a
+    package)."""
+
+    def load(name: str):
+        spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        return module
+
+    return load
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """:data:`TINY` in a file."""
+    path = tmp_path_factory.mktemp("cfg") / "tiny.yml"
+    path.write_text(TINY)
+    return path
 
 
 @pytest.fixture

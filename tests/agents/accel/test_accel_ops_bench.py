@@ -1,34 +1,11 @@
 """bench/accel_ops.py: its count of torch operations per PPO iteration is sound."""
 
-import importlib.util
-from pathlib import Path
-
 import pytest
 
-ROOT = Path(__file__).resolve().parents[3]
-
-TINY = """tether_gym/TetherLibration-v2:
-  n_envs: 8
-  n_steps: 16
-  batch_size: 48
-  n_epochs: 3
-  n_timesteps: 1000
-"""
-
 
 @pytest.fixture(scope="module")
-def accel_ops():
-    spec = importlib.util.spec_from_file_location("accel_ops", ROOT / "bench" / "accel_ops.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-@pytest.fixture(scope="module")
-def tiny(tmp_path_factory):
-    path = tmp_path_factory.mktemp("cfg") / "tiny.yml"
-    path.write_text(TINY)
-    return path
+def accel_ops(load_bench):
+    return load_bench("accel_ops")
 
 
 @pytest.fixture(scope="module")
