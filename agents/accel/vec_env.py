@@ -575,7 +575,7 @@ class TorchTetherVecEnv:
         return self.obs.clone(), self.reward.clone(), terminated, truncated, info
 
     # The parts of a same-step autoreset step, for a learner that captures them as CUDA
-    # graphs (tether_gym_agents.accel.graphs.GraphedEnvStep): step() calls them in turn.
+    # graphs (tether_gym_agents.accel.graphs.RolloutStep): step() calls them in turn.
     # Every part reads and writes only this env's tensors, which stay in the same storage
     # from its construction on (updated in place), and only step_kernel (a numba launch)
     # and step_autoreset (a host branch) cannot be captured.
@@ -609,7 +609,9 @@ class TorchTetherVecEnv:
                        end: Callable[[], None] | None = None) -> None:
         """Last part: reset the rows that ended (a host sync; draws only when one did).
 
-        ``begin``, ``end``: :meth:`reset_begin` and :meth:`reset_end` captured as graphs.
+        Reads the flag and the rows that :meth:`step_end` (the torch backend:
+        :meth:`step_begin`) left. ``begin``, ``end``: :meth:`reset_begin` and
+        :meth:`reset_end` captured as graphs.
         """
         if bool(self._any_ended):
             self._reset_rows(None, begin, end)
