@@ -19,8 +19,8 @@ What a graph needs from a piece, they provide:
   tensor back to the host;
 * no sort: the minibatch orders are drawn before the update
   (:func:`~.trainer._permutations`) and copied into a tensor that it reads.
-  The action samples are drawn inside the graph (CUDA graphs replay torch's random
-  draws with fresh numbers);
+  The action samples and the env's draws are made inside the graphs (each replay
+  draws fresh numbers from where its generator stands);
 * fixed inputs: the rollout's state and buffers (:class:`~.rollout.Rollout`, its step
   index ``t`` included), the env's state and outputs
   (:class:`~.vec_env.TorchTetherVecEnv`), the learning rates, the normalisation
