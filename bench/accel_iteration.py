@@ -2,6 +2,7 @@
 
     python bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs
     python bench/accel_iteration.py --device cpu --backend numba      # the CPU, eager
+    python bench/accel_iteration.py --device cpu --backend numba --compile-update
 
 ``bench/accel_ops.py`` counts what an iteration launches; this script times it. It runs
 the learner's own ``train_seeds`` on a config (default ``configs/gpu_ppo.yml``, J, one
@@ -49,7 +50,7 @@ PARTS = ("act", "kernel", "end", "autoreset", "observe", "finish", "update")
 
 
 def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterations: int,
-         parts: bool) -> list[dict[str, float]]:
+         parts: bool, compile_update: bool = False) -> list[dict[str, float]]:
     """``iterations`` iterations of ``train_seeds``; per iteration {part or "total": s}."""
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.cli import read_config
@@ -115,7 +116,8 @@ def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterati
         with tempfile.TemporaryDirectory() as out:
             run = trainer.GpuRun([0], iterations * settings.n_steps * settings.n_envs,
                                  env_kwargs, Path(out), device, checkpoints=1,
-                                 eval_episodes=1, backend=backend, cuda_graphs=graphs)
+                                 eval_episodes=1, backend=backend, cuda_graphs=graphs,
+                                 compile_update=compile_update)
             clock[0] = time.perf_counter()
             trainer.train_seeds(settings, run, log=None)
     finally:
@@ -127,13 +129,13 @@ def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterati
 
 
 def measure(config: Path, device: torch.device, backend: str, graphs: bool,
-            iterations: int) -> dict:
+            iterations: int, compile_update: bool = False) -> dict:
     """Run 1 and run 2 (the module docstring), summarised."""
     from tether_gym_agents.accel.cli import read_config
 
     settings, timesteps = read_config(config)[:2]
-    plain = _run(config, device, backend, graphs, iterations, parts=False)
-    split = _run(config, device, backend, graphs, iterations, parts=True)
+    plain = _run(config, device, backend, graphs, iterations, False, compile_update)
+    split = _run(config, device, backend, graphs, iterations, True, compile_update)
     per_rollout = settings.n_steps * settings.n_envs
     n_updates = -(-timesteps // per_rollout)
 
@@ -144,7 +146,8 @@ def measure(config: Path, device: torch.device, backend: str, graphs: bool,
     return {"device": str(device),
             "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
             "torch": torch.__version__, "config": str(config), "backend": backend,
-            "cuda_graphs": graphs, "iterations": iterations,
+            "cuda_graphs": graphs, "compile_update": compile_update,
+            "iterations": iterations,
             "timed_iterations": iterations - FIRST_TIMED + 1,
             "ms_per_iteration": iteration_ms,
             "parts_ms_per_iteration": {k: median_ms(split, k) for k in PARTS},
@@ -161,6 +164,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="auto", help="cpu, cuda, cuda:K or auto")
     p.add_argument("--backend", default="torch", help="torch, numba (CPU) or numba-cuda")
     p.add_argument("--cuda-graphs", action="store_true", help="as train.py gpu --cuda-graphs")
+    p.add_argument("--compile-update", action="store_true",
+                   help="as train.py gpu --compile-update (compiled at the first update, "
+                        "which is not timed)")
     p.add_argument("--iterations", type=int, default=12)
     args = p.parse_args(argv)
     if args.iterations < FIRST_TIMED:
@@ -177,7 +183,7 @@ def main(argv=None) -> int:
         p.error("--cuda-graphs needs a CUDA device")
     torch.set_num_threads(1)
     print(json.dumps(measure(args.config, device, args.backend, args.cuda_graphs,
-                             args.iterations)), flush=True)
+                             args.iterations, args.compile_update)), flush=True)
     return 0
 
 

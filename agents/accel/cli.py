@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 import math
 import shlex
+import shutil
 import sys
 import time
 from dataclasses import fields
@@ -29,6 +30,10 @@ MAX_CONFIG_BYTES = MAX_YAML_BYTES
 MAX_SEEDS = 64
 MAX_ENVS = 1 << 22
 """Envs per process (seeds x n_envs) at most: 4M rows, about 2 GB of float64 state."""
+
+
+CPU_COMPILERS = ("g++", "c++", "clang++")
+"""The C++ compilers one of which torch.compile's CPU code (Inductor) needs."""
 
 
 class GpuConfigError(ValueError):
@@ -140,6 +145,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="capture the learner's pieces (the rollout step's two halves, the "
                         "advantages, the minibatch step) as CUDA graphs and replay them "
                         "(CUDA devices only; not yet measured on a GPU: docs/gpu.md)")
+    p.add_argument("--compile-update", action="store_true",
+                   help="fuse each minibatch step's arithmetic with torch.compile (the "
+                        "loss's forward and backward; clipping, Adam and the per-seed rates "
+                        "in one function); compiles at the first update; docs/gpu.md")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -182,6 +191,12 @@ def main(argv=None, clock_start: float | None = None) -> int:
                        _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
         device = resolve_device(args.device)
         check_backend(args.backend, device, compile=args.compile)
+        if ((args.compile or args.compile_update) and device.type == "cpu"
+                and not any(shutil.which(cxx) for cxx in CPU_COMPILERS)):
+            flag = "--compile" if args.compile else "--compile-update"
+            raise GpuConfigError(f"{flag} on the CPU needs a C++ compiler for torch.compile "
+                                 f"(one of {', '.join(CPU_COMPILERS)} on the PATH; for "
+                                 f"instance apt install g++), or leave out {flag}")
         if args.cuda_graphs and device.type != "cuda":
             raise GpuConfigError(f"--cuda-graphs needs a CUDA device (--device cuda or "
                                  f"auto on a GPU machine), got --device {args.device!r} "
@@ -197,7 +212,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
                                            checkpoints=checkpoints, command=command,
                                            clock_start=start, max_seconds=max_seconds,
                                            compile=args.compile, backend=args.backend,
-                                           cuda_graphs=args.cuda_graphs))
+                                           cuda_graphs=args.cuda_graphs,
+                                           compile_update=args.compile_update))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

@@ -34,6 +34,14 @@ from ..files.run_folder import (
 )
 from ..files.safe_format import ObsNormalization, save_agent
 from .graphs import GraphedCall, GraphedUpdate, RolloutStep
+from .minibatch import (
+    ADAM_EPS,
+    CompiledSteps,
+    PerSeedAdam,
+    adapt_rates,
+    minibatch_loss,
+    take,
+)
 from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
@@ -76,7 +84,9 @@ class GpuRun:
     backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend);
     ``cuda_graphs``: the rollout's pieces and the minibatch step captured as CUDA graphs
     and replayed (:mod:`.graphs`; CUDA devices, or the CPU through
-    :class:`~.graphs.RecordingCapture` in the tests).
+    :class:`~.graphs.RecordingCapture` in the tests); ``compile_update``: the minibatch
+    steps' arithmetic fused by ``torch.compile`` (:mod:`.minibatch`: the loss's forward and
+    backward graphs, and the clipping, Adam and per-seed rates in one function).
     """
 
     seeds: list[int]
@@ -92,6 +102,7 @@ class GpuRun:
     compile: bool = False
     backend: str = "torch"
     cuda_graphs: bool = False
+    compile_update: bool = False
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -115,9 +126,13 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's rate scales its Adam step instead (see _minibatch_step), so that the
     # seeds of one optimizer can have their own (adaptive) learning rates
-    opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=1e-5,
-                           fused=device.type == "cuda",
-                           capturable=run.cuda_graphs and device.type == "cuda")
+    opt: torch.optim.Adam | PerSeedAdam
+    if run.compile_update:  # clipping, Adam and the rates in one compiled function
+        opt = PerSeedAdam(policy.parameters(), settings.max_grad_norm)
+    else:
+        opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=ADAM_EPS,
+                               fused=device.type == "cuda",
+                               capturable=run.cuda_graphs and device.type == "cuda")
     rollout = Rollout(policy, settings, d, a, device)
     obs_stats = rollout.obs_stats
     runs = [seed_dir(out, k) for k in seeds]
@@ -134,10 +149,11 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     rollout.start(raw)
     step = RolloutStep(rollout, env, graphs=run.cuda_graphs)  # the env's step included
     finish: Callable[[], None] = rollout.finish
-    minibatch_steps: Callable[..., None] = _minibatch_steps
+    minibatch_steps: Callable[..., None] = (CompiledSteps() if run.compile_update
+                                            else _minibatch_steps)
     if run.cuda_graphs:  # each captured after its warm-up calls, then replayed
         finish = GraphedCall(finish)
-        minibatch_steps = GraphedUpdate(_minibatch_steps)
+        minibatch_steps = GraphedUpdate(minibatch_steps)
     per_rollout = T * N
     n_updates = max(1, math.ceil(timesteps / per_rollout))
     marks = sorted({max(1, round(n_updates * (i + 1) / checkpoints))
@@ -257,12 +273,6 @@ def deterministic_episodes(act, groups: int, env_kwargs, device, episodes: int,
                                                                        strict=True)]}
 
 
-def _take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
-    """Rows ``idx`` (S, b) of each seed's samples x (S, M, ...)."""
-    S = x.shape[0]
-    return torch.gather(x, 1, idx.view(S, -1, *([1] * (x.dim() - 2))).expand(-1, -1, *x.shape[2:]))
-
-
 def _permutations(epochs: int, S: int, M: int, device) -> torch.Tensor:
     """Each epoch's minibatch order per seed (epochs, S, M), drawn before the minibatch steps.
 
@@ -282,16 +292,8 @@ def _minibatch_step(policy, opt, lr, settings: PPOSettings, batch: tuple, idx) -
     per-seed rate.
     """
     params = list(policy.parameters())
-    o, ac, lp0, ad, rt = (_take(x, idx) for x in batch)
-    ad = (ad - ad.mean(dim=1, keepdim=True)) / (ad.std(dim=1, keepdim=True) + 1e-8)
-    dist = policy.distribution(o)
-    lp = dist.log_prob(ac).sum(-1)
-    ratio = torch.exp(lp - lp0)
-    pg = -torch.minimum(ad * ratio, ad * torch.clamp(ratio, 1.0 - settings.clip_range,
-                                                    1.0 + settings.clip_range)).mean(1)
-    vf = (rt - policy.value(o)).square().mean(1)
-    ent = -dist.entropy().sum(-1).mean(1)
-    loss = (pg + settings.ent_coef * ent + settings.vf_coef * vf).sum()
+    o, ac, lp0, ad, rt = (take(x, idx) for x in batch)
+    loss, lp = minibatch_loss(policy, settings, o, ac, lp0, ad, rt)
     opt.zero_grad(set_to_none=True)
     loss.backward()
     policy.per_seed_grad_clip(settings.max_grad_norm)
@@ -301,11 +303,7 @@ def _minibatch_step(policy, opt, lr, settings: PPOSettings, batch: tuple, idx) -
         for p, b in zip(params, before, strict=True):
             p.copy_(b + (p - b) * lr.view(-1, *([1] * (p.dim() - 1))))
     if settings.lr_schedule == "adaptive":
-        with torch.no_grad():  # rsl_rl's rule on the KL of the rollout policy
-            kl = (lp0 - lp).mean(1)
-            lr.copy_(torch.where(kl > 2.0 * settings.desired_kl, lr / 1.5,
-                                 torch.where(kl < 0.5 * settings.desired_kl, lr * 1.5,
-                                             lr)).clamp(1e-5, 1e-2))
+        adapt_rates(lr, lp0, lp, settings)
 
 
 def _minibatch_steps(policy, opt, lr, settings: PPOSettings, batch: tuple,

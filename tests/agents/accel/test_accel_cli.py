@@ -125,3 +125,32 @@ def test_a_process_of_seeds_reproduces_and_its_seeds_depend_on_the_group(tmp_pat
     alone = _trained(tmp_path / "c", *tiny, "--seeds", "1", "--seed", "1", seed=1)
     assert all((first[k] == again[k]).all() for k in first)
     assert not (first["action_net.weight"] == alone["action_net.weight"]).all()
+
+
+def test_compile_update_trains_what_the_eager_update_trains(tmp_path):
+    """``--compile-update`` (the minibatch steps fused by torch.compile): same seed and
+    budget, the run ends with the eager run's weights to float32 rounding (not
+    bitwise: Inductor reorders the arithmetic), in standard agent folders."""
+    tiny = ("--n-envs", "8", "--timesteps", "512", "--seeds", "2")
+    eager = _trained(tmp_path / "eager", *tiny, seed=1)
+    fused = _trained(tmp_path / "fused", *tiny, "--compile-update", seed=1)
+    for name, w in eager.items():
+        assert (fused[name] - w).abs().max() <= 1e-4 * (1.0 + w.abs().max()), name
+    assert any(not (fused[k] == eager[k]).all() for k in eager)  # it ran compiled
+    assert json.loads((tmp_path / "fused" / "seed_1" / "train_info.json").read_text())[
+        "num_timesteps"] >= 512
+
+
+@pytest.mark.parametrize("flag", ["--compile", "--compile-update"])
+def test_compiling_on_a_cpu_without_a_compiler_is_one_line(tmp_path, capsys, monkeypatch,
+                                                          flag):
+    """torch.compile's CPU code needs a C++ compiler: without one, a clear error before
+    any work (no run folder)."""
+    from tether_gym_agents.accel import cli
+
+    monkeypatch.setattr(cli.shutil, "which", lambda name: None)
+    out = tmp_path / "o"
+    assert train_main(["gpu", "--device", "cpu", flag, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag} on the CPU needs a C++ compiler" in err and "g++" in err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()

@@ -1,0 +1,181 @@
+"""One minibatch step of ``train.py gpu``, eager and fused (``--compile-update``): kernels and time.
+
+    python bench/accel_update.py                       # configs/gpu_ppo.yml (J), 1 seed
+    python bench/accel_update.py --seeds 10 --device cuda
+
+On a GPU a minibatch step of a small policy costs its kernel launches (or, inside a
+CUDA graph, the kernels' own start-up), not its arithmetic. This script runs the
+learner's own update on a made-up rollout of the config's size (``n_steps`` x
+``n_envs`` samples per seed, its minibatch size, one epoch), once eagerly
+(:func:`~tether_gym_agents.accel.trainer._minibatch_steps` with Adam, fused on CUDA as
+``train.py gpu`` asks) and once fused (:class:`~tether_gym_agents.accel.minibatch.CompiledSteps`
+with :class:`~tether_gym_agents.accel.minibatch.PerSeedAdam`), and for each reports:
+
+* kernels per minibatch step, from ``torch.profiler`` over one update after a warm-up
+  update (which compiles): on a CUDA device the kernels the GPU ran; on the CPU the
+  operations that run a loop of their own, that is Inductor's fused kernels (profiled
+  with ``torch._inductor.config.cpp.enable_kernel_profile``) and the outermost aten
+  operations, views and allocations left out. The CPU's count is what Inductor makes of
+  the step for the CPU; its CUDA code fuses by the same rules into other kernels, so a
+  GPU's count is its own;
+* milliseconds per minibatch step (median of ``--repeats`` updates, synced).
+
+It prints one JSON line. The eager count here can differ a little from
+``bench/accel_ops.py``'s (another counter: the profiler's outermost operations, with
+the optimizer's inner operations, against every dispatched operation).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+NOT_KERNELS = {"view", "_unsafe_view", "reshape", "expand", "t", "transpose", "permute",
+               "slice", "select", "unsqueeze", "squeeze", "detach", "alias", "as_strided",
+               "lift_fresh", "_reshape_alias", "unbind", "split", "split_with_sizes",
+               "view_as", "resolve_conj", "resolve_neg", "empty", "empty_like",
+               "empty_strided", "result_type", "is_nonzero", "size", "stride", "numel"}
+"""aten operations that run no loop of their own: views and allocations."""
+
+
+def _cpu_kernels(events) -> Counter:
+    """The CPU profile's kernels by name: Inductor's, and the outermost aten operations."""
+    out: Counter = Counter()
+    for e in events:
+        if "cpp_fused" in e.name:
+            out["inductor"] += 1
+            continue
+        if not e.name.startswith("aten::") or e.name[6:].rstrip("_") in NOT_KERNELS:
+            continue
+        parent, nested = e.cpu_parent, False
+        while parent is not None:
+            if parent.name.startswith("aten::"):
+                nested = True
+                break
+            parent = parent.cpu_parent
+        if not nested:
+            out[e.name[6:].rstrip("_")] += 1
+    return out
+
+
+def _cuda_kernels(events) -> Counter:
+    """The CUDA profile's kernels (every kernel the device ran), by kind."""
+    out: Counter = Counter()
+    for e in events:
+        if e.device_type == torch.autograd.DeviceType.CUDA:
+            out["triton" if "triton" in e.name else "other"] += 1
+    return out
+
+
+def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dict:
+    """The module docstring's figures for the config's update, eager and fused."""
+    import torch._inductor.config as inductor_config
+    from torch.profiler import ProfilerActivity, profile
+
+    from tether_gym_agents.accel.cli import read_config
+    from tether_gym_agents.accel.minibatch import ADAM_EPS, CompiledSteps, PerSeedAdam
+    from tether_gym_agents.accel.ppo import MultiSeedPolicy
+    from tether_gym_agents.accel.trainer import _minibatch_steps, _permutations
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    settings, _, env_kwargs = read_config(config)[:3]
+    env = TorchTetherVecEnv(1, **env_kwargs)
+    d, a = env.observation_dim, env.n
+    M = settings.n_steps * settings.n_envs
+    per_update = -(-M // min(settings.batch_size, M))
+    g = torch.Generator().manual_seed(0)
+    batch = tuple(x.to(device) for x in (
+        torch.randn((seeds, M, d), generator=g), 0.05 * torch.randn((seeds, M, a), generator=g),
+        torch.randn((seeds, M), generator=g), torch.randn((seeds, M), generator=g),
+        torch.randn((seeds, M), generator=g)))
+    lr = torch.full((seeds,), settings.learning_rate, device=device)
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda"
+                                           else [])
+
+    def sync() -> None:
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    out: dict = {}
+    for fused in (False, True):
+        policy = MultiSeedPolicy(list(range(seeds)), d, a, settings, device)
+        if fused:
+            opt = PerSeedAdam(policy.parameters(), settings.max_grad_norm)
+            steps = CompiledSteps()
+        else:
+            opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=ADAM_EPS,
+                                   fused=device.type == "cuda")
+            steps = _minibatch_steps
+
+        def update(steps=steps, policy=policy, opt=opt) -> None:
+            steps(policy, opt, lr, settings, batch, _permutations(1, seeds, M, device))
+
+        # Inductor's CPU kernels show in the profile (this process's setting, restored after)
+        with inductor_config.patch({"cpp.enable_kernel_profile": True}):
+            start = time.perf_counter()
+            update()  # the warm-up: compiles when fused
+            sync()
+            first_s = time.perf_counter() - start
+            with profile(activities=activities) as prof:
+                update()
+                sync()
+        events = prof.events()
+        kernels = _cuda_kernels(events) if device.type == "cuda" else _cpu_kernels(events)
+        times = []
+        for _ in range(repeats):
+            sync()
+            start = time.perf_counter()
+            update()
+            sync()
+            times.append(time.perf_counter() - start)
+        out["fused" if fused else "eager"] = {
+            "kernels_per_minibatch_step": round(sum(kernels.values()) / per_update, 1),
+            "most_frequent": [[k, round(n / per_update, 1)] for k, n in kernels.most_common(6)],
+            "ms_per_minibatch_step": round(1e3 * statistics.median(times) / per_update, 3),
+            "first_update_s": round(first_s, 2)}
+    return {"device": str(device),
+            "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
+            "torch": torch.__version__, "config": str(config), "seeds": seeds,
+            "samples_per_seed": M, "minibatch_steps_per_update": per_update,
+            "repeats": repeats, **out,
+            "kernels_ratio": round(out["eager"]["kernels_per_minibatch_step"]
+                                   / out["fused"]["kernels_per_minibatch_step"], 1),
+            "time_ratio": round(out["eager"]["ms_per_minibatch_step"]
+                                / out["fused"]["ms_per_minibatch_step"], 2)}
+
+
+def main(argv=None) -> int:
+    from tether_gym_agents.accel.vec_env import resolve_device
+
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--config", type=Path, default=ROOT / "agents/configs/gpu_ppo.yml")
+    p.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:K or auto")
+    p.add_argument("--seeds", type=int, default=1, help="seeds in the update (default 1)")
+    p.add_argument("--repeats", type=int, default=5, help="timed updates (default 5)")
+    args = p.parse_args(argv)
+    for name, value, high in (("--seeds", args.seeds, 64), ("--repeats", args.repeats, 1000)):
+        if not 1 <= value <= high:
+            p.error(f"{name} must be in [1, {high}], got {value}")
+    if not args.config.is_file():
+        p.error(f"--config {str(args.config)!r} is not a file")
+    try:
+        device = resolve_device(args.device)
+    except (ValueError, ImportError) as exc:
+        p.error(str(exc))
+    torch.set_num_threads(1)
+    print(json.dumps(measure(args.config, device, args.seeds, args.repeats)), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
