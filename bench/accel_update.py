@@ -39,13 +39,14 @@ import torch
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
 
-NOT_KERNELS = {"view", "_unsafe_view", "reshape", "expand", "t", "transpose", "permute",
-               "slice", "select", "unsqueeze", "squeeze", "detach", "alias", "as_strided",
-               "lift_fresh", "_reshape_alias", "unbind", "split", "split_with_sizes",
-               "view_as", "resolve_conj", "resolve_neg", "empty", "empty_like",
-               "empty_strided", "result_type", "is_nonzero", "size", "stride", "numel"}
-"""aten operations that run no loop of their own: views and allocations."""
+from accel_ops import VIEWS  # noqa: E402
+
+NOT_KERNELS = VIEWS | {"resolve_conj", "resolve_neg", "empty", "empty_like", "empty_strided",
+                       "result_type", "is_nonzero", "size", "stride", "numel"}
+"""aten operations that run no loop of their own: accel_ops.py's views, and allocations
+and the like."""
 
 
 def _cpu_kernels(events) -> Counter:

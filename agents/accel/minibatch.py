@@ -27,9 +27,10 @@ from __future__ import annotations
 
 import torch
 
-from .ppo import MultiSeedPolicy, PPOSettings
+from .ppo import MultiSeedPolicy, PPOSettings, clip_scales
 
-__all__ = ["take", "minibatch_loss", "adapt_rates", "PerSeedAdam", "CompiledSteps"]
+__all__ = ["take", "minibatches", "minibatch_loss", "adapt_rates", "PerSeedAdam",
+           "CompiledSteps"]
 
 ADAM_BETAS = (0.9, 0.999)
 """Adam's moment decay rates (torch's and stable-baselines3's defaults)."""
@@ -41,6 +42,19 @@ def take(x: torch.Tensor, idx: torch.Tensor) -> torch.Tensor:
     """Rows ``idx`` (S, b) of each seed's samples x (S, M, ...)."""
     S = x.shape[0]
     return torch.gather(x, 1, idx.view(S, -1, *([1] * (x.dim() - 2))).expand(-1, -1, *x.shape[2:]))
+
+
+def minibatches(orders: torch.Tensor, batch_size: int):
+    """Each minibatch's sample indices (S, b) in turn: a pass per epoch over ``orders``.
+
+    ``orders`` (epochs, S, M) holds each epoch's order per seed; minibatches of
+    ``batch_size`` rows, the last of an epoch shorter when M is not a multiple of it.
+    """
+    M = orders.shape[2]
+    bs = min(batch_size, M)
+    for epoch in range(orders.shape[0]):
+        for start in range(0, M, bs):
+            yield orders[epoch, :, start:start + bs]
 
 
 def minibatch_loss(policy: MultiSeedPolicy, settings: PPOSettings, o, ac, lp0, ad, rt):
@@ -85,18 +99,14 @@ def _clip_adam(params: list, grads: list, exp_avg: list, exp_avg_sq: list,
     """Each seed's gradient clipped to ``max_norm``, then Adam with each seed's rate.
 
     Every tensor has the seed axis first. The clipping is
-    :meth:`~.ppo.MultiSeedPolicy.per_seed_grad_clip`'s (scale min(1, max_norm /
-    (norm + 1e-6)), the norm over all of a seed's gradients); Adam is torch's (moments
-    m = b1 m + (1 - b1) g, v = b2 v + (1 - b2) g^2, bias corrections c1 = 1 - b1^t,
-    c2 = 1 - b2^t, step (m / c1) / (sqrt(v) / sqrt(c2) + eps)), the step times the
-    seed's rate. The step counter ``step`` is a float64 tensor (1,), so that the bias
-    corrections are those of the eager step's float64 arithmetic.
+    :meth:`~.ppo.MultiSeedPolicy.per_seed_grad_clip`'s (:func:`~.ppo.clip_scales`); Adam
+    is torch's (moments m = b1 m + (1 - b1) g, v = b2 v + (1 - b2) g^2, bias
+    corrections c1 = 1 - b1^t, c2 = 1 - b2^t, step (m / c1) / (sqrt(v) / sqrt(c2) + eps)),
+    the step times the seed's rate. The step counter ``step`` is a float64 tensor (1,),
+    so that the bias corrections are those of the eager step's float64 arithmetic.
     """
     b1, b2 = ADAM_BETAS
-    sq = torch.zeros_like(lr)
-    for g in grads:
-        sq = sq + g.reshape(g.shape[0], -1).square().sum(dim=1)
-    scale = torch.clamp(max_norm / (torch.sqrt(sq) + 1e-6), max=1.0)
+    scale = clip_scales(grads, max_norm)[1]
     step.add_(1.0)
     c1 = (1.0 - b1 ** step).to(lr.dtype)
     c2_sqrt = torch.sqrt(1.0 - b2 ** step).to(lr.dtype)
@@ -186,14 +196,10 @@ class CompiledSteps:
         if not isinstance(opt, PerSeedAdam):
             raise TypeError(f"CompiledSteps needs a PerSeedAdam optimizer, got "
                             f"{type(opt).__name__}")
-        M = orders.shape[2]
-        bs = min(settings.batch_size, M)
-        for epoch in range(orders.shape[0]):
-            for start in range(0, M, bs):
-                loss, lp, lp0 = self._loss(policy, settings, batch,
-                                           orders[epoch, :, start:start + bs])
-                opt.zero_grad()
-                loss.backward()
-                opt.step(lr)
-                if settings.lr_schedule == "adaptive":
-                    adapt_rates(lr, lp0, lp, settings)
+        for idx in minibatches(orders, settings.batch_size):
+            loss, lp, lp0 = self._loss(policy, settings, batch, idx)
+            opt.zero_grad()
+            loss.backward()
+            opt.step(lr)
+            if settings.lr_schedule == "adaptive":
+                adapt_rates(lr, lp0, lp, settings)

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 
 import torch
 
-__all__ = ["PPOSettings", "MultiSeedPolicy", "RunningStats", "learning_rate_at"]
+__all__ = ["PPOSettings", "MultiSeedPolicy", "RunningStats", "learning_rate_at",
+           "clip_scales"]
 
 
 @dataclass(frozen=True)
@@ -104,6 +105,19 @@ class RunningStats:
         self.mean.copy_(new_mean)
         self.var.copy_(new_var)
         self.count.copy_(tot)
+
+
+def clip_scales(grads: list[torch.Tensor], max_norm: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Each seed's gradient norm and the factor that clips it to ``max_norm``.
+
+    ``grads`` carry the seed axis first; the norm (S,) is over all of a seed's tensors,
+    the factor min(1, max_norm / (norm + 1e-6)) (SB3's clip_grad_norm_, per seed).
+    """
+    sq = torch.zeros(grads[0].shape[0], device=grads[0].device)
+    for g in grads:
+        sq = sq + g.reshape(g.shape[0], -1).square().sum(dim=1)
+    norm = torch.sqrt(sq)
+    return norm, torch.clamp(max_norm / (norm + 1e-6), max=1.0)
 
 
 def _orthogonal(shape, gain: float, generator: torch.Generator, device) -> torch.Tensor:
@@ -193,11 +207,7 @@ class MultiSeedPolicy(torch.nn.Module):
     def per_seed_grad_clip(self, max_norm: float) -> torch.Tensor:
         """Scale each seed's gradient to a norm of at most ``max_norm``; the norms (S,)."""
         grads = [p.grad for p in self.parameters() if p.grad is not None]
-        sq = torch.zeros(len(self.seeds), device=self.log_std.device)
-        for g in grads:
-            sq = sq + g.reshape(g.shape[0], -1).square().sum(dim=1)
-        norm = torch.sqrt(sq)
-        scale = torch.clamp(max_norm / (norm + 1e-6), max=1.0)
+        norm, scale = clip_scales(grads, max_norm)
         for g in grads:
             g.mul_(scale.view(-1, *([1] * (g.dim() - 1))))
         return norm

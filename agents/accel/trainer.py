@@ -40,6 +40,7 @@ from .minibatch import (
     PerSeedAdam,
     adapt_rates,
     minibatch_loss,
+    minibatches,
     take,
 )
 from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
@@ -315,11 +316,8 @@ def _minibatch_steps(policy, opt, lr, settings: PPOSettings, batch: tuple,
     when M is not a multiple of it). No host sync and no random draw: a CUDA graph can
     capture it whole (:class:`~.graphs.GraphedUpdate`).
     """
-    M = orders.shape[2]
-    bs = min(settings.batch_size, M)
-    for epoch in range(orders.shape[0]):
-        for start in range(0, M, bs):
-            _minibatch_step(policy, opt, lr, settings, batch, orders[epoch, :, start:start + bs])
+    for idx in minibatches(orders, settings.batch_size):
+        _minibatch_step(policy, opt, lr, settings, batch, idx)
 
 
 def _update(policy, opt, lr, settings: PPOSettings, batch: RolloutBatch,
