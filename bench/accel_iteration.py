@@ -3,6 +3,7 @@
     python bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs
     python bench/accel_iteration.py --device cpu --backend numba      # the CPU, eager
     python bench/accel_iteration.py --device cpu --backend numba --compile-update
+    python bench/accel_iteration.py --device cpu --backend numba --compile-update --compile-rollout
 
 ``bench/accel_ops.py`` counts what an iteration launches; this script times it. It runs
 the learner's own ``train_seeds`` on a config (default ``configs/gpu_ppo.yml``, J, one
@@ -49,9 +50,13 @@ FIRST_TIMED = 5
 PARTS = ("act", "kernel", "end", "autoreset", "observe", "finish", "update")
 
 
-def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterations: int,
-         parts: bool, compile_update: bool = False) -> list[dict[str, float]]:
-    """``iterations`` iterations of ``train_seeds``; per iteration {part or "total": s}."""
+def _run(config: Path, device: torch.device, iterations: int, parts: bool,
+         options: dict) -> list[dict[str, float]]:
+    """``iterations`` iterations of ``train_seeds``; per iteration {part or "total": s}.
+
+    ``options``: :class:`~tether_gym_agents.accel.trainer.GpuRun`'s ``backend``,
+    ``cuda_graphs``, ``compile_update`` and ``compile_rollout``.
+    """
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.cli import read_config
     from tether_gym_agents.accel.graphs import RolloutStep
@@ -109,6 +114,7 @@ def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterati
             trainer.evaluate_on_device)
     trainer._update, trainer.GraphedCall, trainer.RolloutStep = update, graphed_call, TimedStep
     trainer.evaluate_on_device = lambda *args, **kwargs: {}
+    graphs = options["cuda_graphs"]
     if parts and not graphs:
         real_finish = trainer.Rollout.finish
         trainer.Rollout.finish = timed("finish", real_finish)  # type: ignore[method-assign]
@@ -116,8 +122,7 @@ def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterati
         with tempfile.TemporaryDirectory() as out:
             run = trainer.GpuRun([0], iterations * settings.n_steps * settings.n_envs,
                                  env_kwargs, Path(out), device, checkpoints=1,
-                                 eval_episodes=1, backend=backend, cuda_graphs=graphs,
-                                 compile_update=compile_update)
+                                 eval_episodes=1, **options)
             clock[0] = time.perf_counter()
             trainer.train_seeds(settings, run, log=None)
     finally:
@@ -128,14 +133,13 @@ def _run(config: Path, device: torch.device, backend: str, graphs: bool, iterati
     return done
 
 
-def measure(config: Path, device: torch.device, backend: str, graphs: bool,
-            iterations: int, compile_update: bool = False) -> dict:
-    """Run 1 and run 2 (the module docstring), summarised."""
+def measure(config: Path, device: torch.device, iterations: int, options: dict) -> dict:
+    """Run 1 and run 2 (the module docstring), summarised; ``options`` as :func:`_run`'s."""
     from tether_gym_agents.accel.cli import read_config
 
     settings, timesteps = read_config(config)[:2]
-    plain = _run(config, device, backend, graphs, iterations, False, compile_update)
-    split = _run(config, device, backend, graphs, iterations, True, compile_update)
+    plain = _run(config, device, iterations, False, options)
+    split = _run(config, device, iterations, True, options)
     per_rollout = settings.n_steps * settings.n_envs
     n_updates = -(-timesteps // per_rollout)
 
@@ -145,8 +149,7 @@ def measure(config: Path, device: torch.device, backend: str, graphs: bool,
     iteration_ms = median_ms(plain, "total")
     return {"device": str(device),
             "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
-            "torch": torch.__version__, "config": str(config), "backend": backend,
-            "cuda_graphs": graphs, "compile_update": compile_update,
+            "torch": torch.__version__, "config": str(config), **options,
             "iterations": iterations,
             "timed_iterations": iterations - FIRST_TIMED + 1,
             "ms_per_iteration": iteration_ms,
@@ -167,6 +170,9 @@ def main(argv=None) -> int:
     p.add_argument("--compile-update", action="store_true",
                    help="as train.py gpu --compile-update (compiled at the first update, "
                         "which is not timed)")
+    p.add_argument("--compile-rollout", action="store_true",
+                   help="as train.py gpu --compile-rollout (compiled at the first "
+                        "iteration, which is not timed)")
     p.add_argument("--iterations", type=int, default=12)
     args = p.parse_args(argv)
     if args.iterations < FIRST_TIMED:
@@ -182,8 +188,9 @@ def main(argv=None) -> int:
     if args.cuda_graphs and device.type != "cuda":
         p.error("--cuda-graphs needs a CUDA device")
     torch.set_num_threads(1)
-    print(json.dumps(measure(args.config, device, args.backend, args.cuda_graphs,
-                             args.iterations, args.compile_update)), flush=True)
+    options = {"backend": args.backend, "cuda_graphs": args.cuda_graphs,
+               "compile_update": args.compile_update, "compile_rollout": args.compile_rollout}
+    print(json.dumps(measure(args.config, device, args.iterations, options)), flush=True)
     return 0
 
 

@@ -149,6 +149,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fuse each minibatch step's arithmetic with torch.compile (the "
                         "loss's forward and backward; clipping, Adam and the per-seed rates "
                         "in one function); compiles at the first update; docs/gpu.md")
+    p.add_argument("--compile-rollout", action="store_true",
+                   help="fuse the rollout's arithmetic with torch.compile (the policy's "
+                        "half of each step after its draws, the learner's half, the "
+                        "advantages); compiles at the first steps; docs/gpu.md")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -191,9 +195,12 @@ def main(argv=None, clock_start: float | None = None) -> int:
                        _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
         device = resolve_device(args.device)
         check_backend(args.backend, device, compile=args.compile)
-        if ((args.compile or args.compile_update) and device.type == "cpu"
+        compiles = [flag for flag, on in (("--compile", args.compile),
+                                          ("--compile-update", args.compile_update),
+                                          ("--compile-rollout", args.compile_rollout)) if on]
+        if (compiles and device.type == "cpu"
                 and not any(shutil.which(cxx) for cxx in CPU_COMPILERS)):
-            flag = "--compile" if args.compile else "--compile-update"
+            flag = compiles[0]
             raise GpuConfigError(f"{flag} on the CPU needs a C++ compiler for torch.compile "
                                  f"(one of {', '.join(CPU_COMPILERS)} on the PATH; for "
                                  f"instance apt install g++), or leave out {flag}")
@@ -213,7 +220,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
                                            clock_start=start, max_seconds=max_seconds,
                                            compile=args.compile, backend=args.backend,
                                            cuda_graphs=args.cuda_graphs,
-                                           compile_update=args.compile_update))
+                                           compile_update=args.compile_update,
+                                           compile_rollout=args.compile_rollout))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

@@ -9,10 +9,13 @@ write only tensors that stay in the same storage for the whole run: this object'
 the policy's weights and the normalisation statistics, each updated in place. The
 step index ``t`` is a tensor too. So each of the three can be captured as a CUDA graph
 and replayed (:mod:`.graphs`, ``train.py gpu --cuda-graphs``), and called eagerly
-they compute exactly what they compute in a graph.
+they compute exactly what they compute in a graph. With ``compiled`` (``train.py gpu
+--compile-rollout``) the three run through ``torch.compile``, the action draws aside.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import torch
 
@@ -85,6 +88,12 @@ class Rollout:
         Observation and action sizes of one env.
     device : torch.device
         Where every tensor lives.
+    compiled : bool
+        Run :meth:`record_step`, :meth:`observe_step` and :meth:`finish_step` through
+        ``torch.compile`` (``train.py gpu --compile-rollout``; default False). The
+        action draws stay eager (:meth:`draw`), so a seed draws the same numbers
+        compiled or not; the arithmetic equals the eager one to float32 rounding
+        (Inductor fuses and reorders it). Each compiles at its first call.
 
     Attributes
     ----------
@@ -102,7 +111,7 @@ class Rollout:
     """
 
     def __init__(self, policy: MultiSeedPolicy, settings: PPOSettings, obs_dim: int,
-                 act_dim: int, device):
+                 act_dim: int, device, compiled: bool = False):
         S, N, T = len(policy.seeds), settings.n_envs, settings.n_steps
         d, a = obs_dim, act_dim
         f64 = torch.float64
@@ -130,6 +139,13 @@ class Rollout:
         self.done_fail = torch.zeros(S, device=device)
         self.done_ret = torch.zeros(S, dtype=f64, device=device)
         self.batch = RolloutBatch(T, S, N, d, a, device)
+        self._record: Callable[[torch.Tensor], None] = self.record_step
+        self._observe: Callable[[], None] = self.observe_step
+        self._finish: Callable[[], None] = self.finish_step
+        if compiled:  # each compiled at its first call, fused by Inductor
+            self._record, self._observe, self._finish = (
+                torch.compile(f, fullgraph=True, dynamic=False)
+                for f in (self.record_step, self.observe_step, self.finish_step))
 
     def start(self, raw: torch.Tensor) -> None:
         """The first observations (S N, d) of the run: into the statistics, normalised."""
@@ -141,12 +157,28 @@ class Rollout:
     def act(self) -> None:
         """Sample each env's action and record the step at ``t``.
 
+        The standard normal draws come first (:meth:`draw`, eager), then
+        :meth:`record_step` (compiled with ``compiled``) makes the actions of them.
+        """
+        self._record(self.draw())
+
+    def draw(self) -> torch.Tensor:
+        """The step's standard normal draws (S, N, act) from torch's default generator.
+
+        ``torch.distributions.Normal.sample`` draws the same numbers (``normal_(0, 1)``
+        of the output, then times the scale plus the mean): tested equal.
+        """
+        return torch.randn(self.action.shape, device=self.action.device)
+
+    def record_step(self, noise: torch.Tensor) -> None:
+        """The actions mean + std ``noise``, their records at row ``t``, the clipped action.
+
         The observation, action, start flag, log-probability and value go into the
         buffers at row ``t``; the clipped action into :attr:`action`.
         """
         policy, t = self.policy, self.t
         dist = policy.distribution(self.obs)
-        act = dist.sample()
+        act = noise * dist.scale + dist.loc  # Normal.sample's arithmetic on its draws
         self.buf_obs.index_copy_(0, t, self.obs[None])
         self.buf_act.index_copy_(0, t, act[None])
         self.buf_start.index_copy_(0, t, self.episode_start.float()[None])
@@ -161,6 +193,10 @@ class Rollout:
             dst.copy_(src)
 
     def observe(self) -> None:
+        """Take the env's step in (:meth:`observe_step`, compiled with ``compiled``)."""
+        self._observe()
+
+    def observe_step(self) -> None:
         """Take the env's step in: observations, rewards, ended episodes; then ``t`` + 1.
 
         Normalises the new observations and the rewards, bootstraps the truncated
@@ -189,6 +225,10 @@ class Rollout:
         self.t.add_(1)
 
     def finish(self) -> None:
+        """GAE(lambda) into :attr:`batch`, and ``t`` back to 0 (:meth:`finish_step`)."""
+        self._finish()
+
+    def finish_step(self) -> None:
         """GAE(lambda) into :attr:`batch`, and ``t`` back to 0.
 
         SB3's ``compute_returns_and_advantage`` over the recorded rollout.

@@ -87,7 +87,10 @@ class GpuRun:
     and replayed (:mod:`.graphs`; CUDA devices, or the CPU through
     :class:`~.graphs.RecordingCapture` in the tests); ``compile_update``: the minibatch
     steps' arithmetic fused by ``torch.compile`` (:mod:`.minibatch`: the loss's forward and
-    backward graphs, and the clipping, Adam and per-seed rates in one function).
+    backward graphs, and the clipping, Adam and per-seed rates in one function);
+    ``compile_rollout``: the rollout's arithmetic fused by ``torch.compile`` (the policy's
+    half of a step after its eager draws, the learner's half and the advantages:
+    :class:`~.rollout.Rollout` with ``compiled``).
     """
 
     seeds: list[int]
@@ -104,6 +107,7 @@ class GpuRun:
     backend: str = "torch"
     cuda_graphs: bool = False
     compile_update: bool = False
+    compile_rollout: bool = False
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -134,7 +138,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
         opt = torch.optim.Adam(policy.parameters(), lr=1.0, eps=ADAM_EPS,
                                fused=device.type == "cuda",
                                capturable=run.cuda_graphs and device.type == "cuda")
-    rollout = Rollout(policy, settings, d, a, device)
+    rollout = Rollout(policy, settings, d, a, device, compiled=run.compile_rollout)
     obs_stats = rollout.obs_stats
     runs = [seed_dir(out, k) for k in seeds]
     for folder in runs:

@@ -127,13 +127,15 @@ def test_a_process_of_seeds_reproduces_and_its_seeds_depend_on_the_group(tmp_pat
     assert not (first["action_net.weight"] == alone["action_net.weight"]).all()
 
 
-def test_compile_update_trains_what_the_eager_update_trains(tmp_path):
-    """``--compile-update`` (the minibatch steps fused by torch.compile): same seed and
-    budget, the run ends with the eager run's weights to float32 rounding (not
-    bitwise: Inductor reorders the arithmetic), in standard agent folders."""
+@pytest.mark.parametrize("flag", ["--compile-update", "--compile-rollout"])
+def test_compiled_learners_train_what_the_eager_learner_trains(tmp_path, flag):
+    """``--compile-update`` (the minibatch steps fused by torch.compile) and
+    ``--compile-rollout`` (the rollout's arithmetic fused): same seed and budget, the
+    run ends with the eager run's weights to float32 rounding (not bitwise: Inductor
+    reorders the arithmetic), in standard agent folders."""
     tiny = ("--n-envs", "8", "--timesteps", "512", "--seeds", "2")
     eager = _trained(tmp_path / "eager", *tiny, seed=1)
-    fused = _trained(tmp_path / "fused", *tiny, "--compile-update", seed=1)
+    fused = _trained(tmp_path / "fused", *tiny, flag, seed=1)
     for name, w in eager.items():
         assert (fused[name] - w).abs().max() <= 1e-4 * (1.0 + w.abs().max()), name
     assert any(not (fused[k] == eager[k]).all() for k in eager)  # it ran compiled
@@ -141,7 +143,7 @@ def test_compile_update_trains_what_the_eager_update_trains(tmp_path):
         "num_timesteps"] >= 512
 
 
-@pytest.mark.parametrize("flag", ["--compile", "--compile-update"])
+@pytest.mark.parametrize("flag", ["--compile", "--compile-update", "--compile-rollout"])
 def test_compiling_on_a_cpu_without_a_compiler_is_one_line(tmp_path, capsys, monkeypatch,
                                                           flag):
     """torch.compile's CPU code needs a C++ compiler: without one, a clear error before

@@ -96,3 +96,77 @@ def test_rollout_bootstraps_truncations_and_computes_sb3s_gae():
                                    rtol=1e-5, atol=1e-6)
     assert rollout.buf_start[1:].sum() == int((term | trunc)[:-1].sum())
     assert int(rollout.t) == 0
+
+
+@torch.no_grad()
+def test_the_action_draws_are_normal_samples():
+    """:meth:`Rollout.act` draws eagerly and makes the actions of the draws: the actions
+    are bitwise ``Normal(mean, std).sample()`` from the same generator state, their
+    log-probabilities and values the distribution's and the value net's."""
+    S, N, d, a = 2, 5, 4, 3
+    s = PPOSettings(n_envs=N, n_steps=2, net_arch=(8,), log_std_init=-1.0)
+    policy = MultiSeedPolicy([5, 6], d, a, s, "cpu")
+    rollout = Rollout(policy, s, d, a, "cpu")
+    rollout.start(torch.randn((S * N, d), dtype=torch.float64))
+    torch.manual_seed(11)
+    rollout.act()
+    dist = policy.distribution(rollout.obs)
+    torch.manual_seed(11)
+    want = dist.sample()
+    assert torch.equal(rollout.buf_act[0], want)
+    assert torch.equal(rollout.buf_logp[0], dist.log_prob(want).sum(-1))
+    assert torch.equal(rollout.buf_val[0], policy.value(rollout.obs))
+    assert torch.equal(rollout.action, torch.clamp(want, -1.0, 1.0))
+    assert torch.equal(rollout.buf_obs[0], rollout.obs) and int(rollout.t) == 0
+
+
+def _rollout_run(compiled: bool):
+    """Two iterations of 6 steps, 2 seeds x 4 envs, on made-up env steps with ended and
+    truncated rows; the rollout's state and batch after them."""
+    S, N, T, d, a = 2, 4, 6, 5, 2
+    s = PPOSettings(n_envs=N, n_steps=T, gamma=0.9, gae_lambda=0.8, net_arch=(8, 8),
+                    log_std_init=-1.0)
+    policy = MultiSeedPolicy([1, 2], d, a, s, "cpu")
+    rollout = Rollout(policy, s, d, a, "cpu", compiled=compiled)
+    g = torch.Generator().manual_seed(3)
+    torch.manual_seed(7)
+    rollout.start(3.0 * torch.randn((S * N, d), generator=g, dtype=torch.float64))
+    for _ in range(2):
+        for _ in range(T):
+            rollout.act()
+            raw = 3.0 * torch.randn((S * N, d), generator=g, dtype=torch.float64)
+            rew = torch.randn(S * N, generator=g, dtype=torch.float64)
+            ended = torch.rand(S * N, generator=g) < 0.3
+            trunc = ended & (torch.rand(S * N, generator=g) < 0.5)
+            final = torch.randn((S * N, d), generator=g, dtype=torch.float64)
+            rollout.take(raw, rew, ended & ~trunc, trunc, final)
+            rollout.observe()
+        rollout.finish()
+    stats = (rollout.obs_stats.mean, rollout.obs_stats.var, rollout.obs_stats.count,
+             rollout.ret_stats.mean, rollout.ret_stats.var, rollout.returns, rollout.ep_ret,
+             rollout.done_eps, rollout.done_fail, rollout.done_ret)
+    return ([x.clone() for x in stats], [x.clone() for x in rollout.batch.tensors()],
+            [x.clone() for x in (rollout.obs, rollout.action, rollout.episode_start)],
+            int(rollout.t))
+
+
+@pytest.mark.slow
+@torch.no_grad()
+def test_the_compiled_rollout_is_the_eager_one():
+    """``compiled=True`` (``train.py gpu --compile-rollout``; Inductor on the CPU): after
+    two iterations the statistics and counts (float64) equal the eager rollout's to
+    1e-12, the batch, observations and actions (float32) to float32 rounding, the start
+    flags and ``t`` exactly; and the three pieces ran compiled."""
+    from torch._dynamo.utils import counters
+
+    torch._dynamo.reset()
+    before = counters["stats"]["unique_graphs"]
+    want = _rollout_run(compiled=False)
+    got = _rollout_run(compiled=True)
+    assert counters["stats"]["unique_graphs"] - before >= 3  # record, observe, finish
+    for x, y in zip(got[0], want[0], strict=True):
+        torch.testing.assert_close(x, y, rtol=1e-12, atol=1e-12)
+    assert float(want[0][7].sum()) > 0 and float(want[0][8].sum()) > 0  # episodes ended
+    for x, y in zip(got[1] + got[2][:2], want[1] + want[2][:2], strict=True):
+        torch.testing.assert_close(x, y, rtol=1e-5, atol=1e-5 * float(y.abs().max()))
+    assert torch.equal(got[2][2], want[2][2]) and got[3] == want[3] == 0
