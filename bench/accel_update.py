@@ -78,11 +78,63 @@ def _cuda_kernels(events) -> Counter:
     return out
 
 
-def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dict:
-    """The module docstring's figures for the config's update, eager and fused."""
+def kernels_and_time(fn, device: torch.device, repeats: int, per: int, unit: str,
+                     first: str) -> dict:
+    """One column of the figures: ``fn`` (a whole update or iteration) profiled and timed.
+
+    Its first call (the warm-up, which compiles a fused ``fn``) is timed as ``first``
+    [s]; one profiled call then gives the kernels per ``unit`` (the call's count divided
+    by ``per``), and ``repeats`` more calls the milliseconds per ``unit`` (median).
+    """
     import torch._inductor.config as inductor_config
     from torch.profiler import ProfilerActivity, profile
 
+    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda"
+                                           else [])
+
+    def sync() -> None:
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    # Inductor's CPU kernels show in the profile (this process's setting, restored after)
+    with inductor_config.patch({"cpp.enable_kernel_profile": True}):
+        start = time.perf_counter()
+        fn()
+        sync()
+        first_s = time.perf_counter() - start
+        with profile(activities=activities) as prof:
+            fn()
+            sync()
+    events = prof.events()
+    kernels = _cuda_kernels(events) if device.type == "cuda" else _cpu_kernels(events)
+    times = []
+    for _ in range(repeats):
+        sync()
+        start = time.perf_counter()
+        fn()
+        sync()
+        times.append(time.perf_counter() - start)
+    return {f"kernels_per_{unit}": round(sum(kernels.values()) / per, 1),
+            "most_frequent": [[k, round(n / per, 1)] for k, n in kernels.most_common(6)],
+            f"ms_per_{unit}": round(1e3 * statistics.median(times) / per, 4),
+            first: round(first_s, 2)}
+
+
+def summary(config: Path, device: torch.device, seeds: int, out: dict, unit: str,
+            **sizes) -> dict:
+    """The JSON line: the machine, the settings ``sizes``, both columns and their ratios."""
+    eager, fused = out["eager"], out["fused"]
+    return {"device": str(device),
+            "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
+            "torch": torch.__version__, "config": str(config), "seeds": seeds, **sizes,
+            **out,
+            "kernels_ratio": round(eager[f"kernels_per_{unit}"] / fused[f"kernels_per_{unit}"],
+                                   1),
+            "time_ratio": round(eager[f"ms_per_{unit}"] / fused[f"ms_per_{unit}"], 2)}
+
+
+def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dict:
+    """The module docstring's figures for the config's update, eager and fused."""
     from tether_gym_agents.accel.cli import read_config
     from tether_gym_agents.accel.minibatch import ADAM_EPS, CompiledSteps, PerSeedAdam
     from tether_gym_agents.accel.ppo import MultiSeedPolicy
@@ -100,13 +152,6 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dic
         torch.randn((seeds, M), generator=g), torch.randn((seeds, M), generator=g),
         torch.randn((seeds, M), generator=g)))
     lr = torch.full((seeds,), settings.learning_rate, device=device)
-    activities = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if device.type == "cuda"
-                                           else [])
-
-    def sync() -> None:
-        if device.type == "cuda":
-            torch.cuda.synchronize(device)
-
     out: dict = {}
     for fused in (False, True):
         policy = MultiSeedPolicy(list(range(seeds)), d, a, settings, device)
@@ -121,48 +166,25 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dic
         def update(steps=steps, policy=policy, opt=opt) -> None:
             steps(policy, opt, lr, settings, batch, _permutations(1, seeds, M, device))
 
-        # Inductor's CPU kernels show in the profile (this process's setting, restored after)
-        with inductor_config.patch({"cpp.enable_kernel_profile": True}):
-            start = time.perf_counter()
-            update()  # the warm-up: compiles when fused
-            sync()
-            first_s = time.perf_counter() - start
-            with profile(activities=activities) as prof:
-                update()
-                sync()
-        events = prof.events()
-        kernels = _cuda_kernels(events) if device.type == "cuda" else _cpu_kernels(events)
-        times = []
-        for _ in range(repeats):
-            sync()
-            start = time.perf_counter()
-            update()
-            sync()
-            times.append(time.perf_counter() - start)
-        out["fused" if fused else "eager"] = {
-            "kernels_per_minibatch_step": round(sum(kernels.values()) / per_update, 1),
-            "most_frequent": [[k, round(n / per_update, 1)] for k, n in kernels.most_common(6)],
-            "ms_per_minibatch_step": round(1e3 * statistics.median(times) / per_update, 3),
-            "first_update_s": round(first_s, 2)}
-    return {"device": str(device),
-            "gpu": torch.cuda.get_device_name(device) if device.type == "cuda" else None,
-            "torch": torch.__version__, "config": str(config), "seeds": seeds,
-            "samples_per_seed": M, "minibatch_steps_per_update": per_update,
-            "repeats": repeats, **out,
-            "kernels_ratio": round(out["eager"]["kernels_per_minibatch_step"]
-                                   / out["fused"]["kernels_per_minibatch_step"], 1),
-            "time_ratio": round(out["eager"]["ms_per_minibatch_step"]
-                                / out["fused"]["ms_per_minibatch_step"], 2)}
+        out["fused" if fused else "eager"] = kernels_and_time(
+            update, device, repeats, per_update, "minibatch_step", "first_update_s")
+    return summary(config, device, seeds, out, "minibatch_step", samples_per_seed=M,
+                   minibatch_steps_per_update=per_update, repeats=repeats)
 
 
-def main(argv=None) -> int:
+def cli(measure_fn, description: str, what: str, argv=None) -> int:
+    """The command line of this script and of ``accel_rollout.py``: parse, check, measure.
+
+    ``measure_fn(config, device, seeds, repeats)`` gives the JSON line; ``what`` names
+    what ``--seeds`` and ``--repeats`` count in the help.
+    """
     from tether_gym_agents.accel.vec_env import resolve_device
 
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = argparse.ArgumentParser(description=description)
     p.add_argument("--config", type=Path, default=ROOT / "agents/configs/gpu_ppo.yml")
     p.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:K or auto")
-    p.add_argument("--seeds", type=int, default=1, help="seeds in the update (default 1)")
-    p.add_argument("--repeats", type=int, default=5, help="timed updates (default 5)")
+    p.add_argument("--seeds", type=int, default=1, help=f"seeds in the {what} (default 1)")
+    p.add_argument("--repeats", type=int, default=5, help=f"timed {what}s (default 5)")
     args = p.parse_args(argv)
     for name, value, high in (("--seeds", args.seeds, 64), ("--repeats", args.repeats, 1000)):
         if not 1 <= value <= high:
@@ -174,8 +196,12 @@ def main(argv=None) -> int:
     except (ValueError, ImportError) as exc:
         p.error(str(exc))
     torch.set_num_threads(1)
-    print(json.dumps(measure(args.config, device, args.seeds, args.repeats)), flush=True)
+    print(json.dumps(measure_fn(args.config, device, args.seeds, args.repeats)), flush=True)
     return 0
+
+
+def main(argv=None) -> int:
+    return cli(measure, __doc__.split("\n")[0], "update", argv)
 
 
 if __name__ == "__main__":

@@ -29,9 +29,11 @@ def test_the_fused_step_runs_a_fraction_of_the_eager_kernels(bench, tiny, capsys
     assert eager["ms_per_minibatch_step"] > 0 and fused["ms_per_minibatch_step"] > 0
 
 
+@pytest.mark.parametrize("name", ["accel_update", "accel_rollout"])
 @pytest.mark.parametrize("argv", [["--seeds", "0"], ["--repeats", "0"],
                                   ["--device", "cuda:99"]])
-def test_bad_arguments_are_refused(bench, tiny, argv):
+def test_bad_arguments_are_refused(load_bench, tiny, name, argv):
+    """The command line of accel_update.py, which accel_rollout.py shares (``cli``)."""
     with pytest.raises(SystemExit) as exc:
-        bench.main(["--config", str(tiny), *argv])
+        load_bench(name).main(["--config", str(tiny), *argv])
     assert exc.value.code == 2
