@@ -4,6 +4,7 @@
     python bench/accel_iteration.py --device cpu --backend numba      # the CPU, eager
     python bench/accel_iteration.py --device cpu --backend numba --compile-update
     python bench/accel_iteration.py --device cpu --backend numba --compile-update --compile-rollout
+    python bench/accel_iteration.py --backend numba --compile --compile-update --compile-rollout
 
 ``bench/accel_ops.py`` counts what an iteration launches; this script times it. It runs
 the learner's own ``train_seeds`` on a config (default ``configs/gpu_ppo.yml``, J, one
@@ -55,7 +56,7 @@ def _run(config: Path, device: torch.device, iterations: int, parts: bool,
     """``iterations`` iterations of ``train_seeds``; per iteration {part or "total": s}.
 
     ``options``: :class:`~tether_gym_agents.accel.trainer.GpuRun`'s ``backend``,
-    ``cuda_graphs``, ``compile_update`` and ``compile_rollout``.
+    ``cuda_graphs``, ``compile``, ``compile_update`` and ``compile_rollout``.
     """
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.cli import read_config
@@ -167,6 +168,9 @@ def main(argv=None) -> int:
     p.add_argument("--device", default="auto", help="cpu, cuda, cuda:K or auto")
     p.add_argument("--backend", default="torch", help="torch, numba (CPU) or numba-cuda")
     p.add_argument("--cuda-graphs", action="store_true", help="as train.py gpu --cuda-graphs")
+    p.add_argument("--compile", action="store_true",
+                   help="as train.py gpu --compile (the env's torch arithmetic; compiled at "
+                        "the first steps, which are not timed)")
     p.add_argument("--compile-update", action="store_true",
                    help="as train.py gpu --compile-update (compiled at the first update, "
                         "which is not timed)")
@@ -189,7 +193,8 @@ def main(argv=None) -> int:
         p.error("--cuda-graphs needs a CUDA device")
     torch.set_num_threads(1)
     options = {"backend": args.backend, "cuda_graphs": args.cuda_graphs,
-               "compile_update": args.compile_update, "compile_rollout": args.compile_rollout}
+               "compile": args.compile, "compile_update": args.compile_update,
+               "compile_rollout": args.compile_rollout}
     print(json.dumps(measure(args.config, device, args.iterations, options)), flush=True)
     return 0
 

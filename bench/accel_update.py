@@ -44,7 +44,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 from accel_ops import VIEWS  # noqa: E402
 
 NOT_KERNELS = VIEWS | {"resolve_conj", "resolve_neg", "empty", "empty_like", "empty_strided",
-                       "result_type", "is_nonzero", "size", "stride", "numel"}
+                       "result_type", "promote_types", "is_nonzero", "size", "stride",
+                       "numel"}
 """aten operations that run no loop of their own: accel_ops.py's views, and allocations
 and the like."""
 
@@ -172,19 +173,24 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int) -> dic
                    minibatch_steps_per_update=per_update, repeats=repeats)
 
 
-def cli(measure_fn, description: str, what: str, argv=None) -> int:
+def cli(measure_fn, description: str, what: str, argv=None, env: bool = False) -> int:
     """The command line of this script and of ``accel_rollout.py``: parse, check, measure.
 
     ``measure_fn(config, device, seeds, repeats)`` gives the JSON line; ``what`` names
-    what ``--seeds`` and ``--repeats`` count in the help.
+    what ``--seeds`` and ``--repeats`` count in the help. ``env``: an ``--env BACKEND``
+    option too, checked on the device and passed on as ``env=``.
     """
-    from tether_gym_agents.accel.vec_env import resolve_device
+    from tether_gym_agents.accel.vec_env import check_backend, resolve_device
 
     p = argparse.ArgumentParser(description=description)
     p.add_argument("--config", type=Path, default=ROOT / "agents/configs/gpu_ppo.yml")
     p.add_argument("--device", default="cpu", help="cpu (default), cuda, cuda:K or auto")
     p.add_argument("--seeds", type=int, default=1, help=f"seeds in the {what} (default 1)")
     p.add_argument("--repeats", type=int, default=5, help=f"timed {what}s (default 5)")
+    if env:
+        p.add_argument("--env", default=None, metavar="BACKEND",
+                       help="step a real env of this backend (numba on the CPU, numba-cuda "
+                            "or torch) instead of made-up steps")
     args = p.parse_args(argv)
     for name, value, high in (("--seeds", args.seeds, 64), ("--repeats", args.repeats, 1000)):
         if not 1 <= value <= high:
@@ -193,10 +199,14 @@ def cli(measure_fn, description: str, what: str, argv=None) -> int:
         p.error(f"--config {str(args.config)!r} is not a file")
     try:
         device = resolve_device(args.device)
+        if env and args.env is not None:
+            check_backend(args.env, device)
     except (ValueError, ImportError) as exc:
         p.error(str(exc))
     torch.set_num_threads(1)
-    print(json.dumps(measure_fn(args.config, device, args.seeds, args.repeats)), flush=True)
+    kwargs = {"env": args.env} if env else {}
+    print(json.dumps(measure_fn(args.config, device, args.seeds, args.repeats, **kwargs)),
+          flush=True)
     return 0
 
 

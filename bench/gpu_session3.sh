@@ -35,12 +35,13 @@
 #   The run folders come back in $OUT/runs3.tar.gz for `python evaluate.py` here. The
 #   learner comparison (experiments/issue34/learners.py --device cuda --config
 #   configs/gpu_ppo.yml) is left for a session with time to spare.
-#   7. (a third call, if device time is left) the learner fused by torch.compile
-#      (--compile-update and --compile-rollout, written 2026-12-07 without a device; on
-#      the CPU 367 -> 27 kernels per minibatch step, 141 -> 26 per rollout step, the
-#      env's step aside): their kernels and time on the GPU, eager against fused
-#      (bench/accel_update.py and bench/accel_rollout.py, 10 seeds), an iteration of J
-#      with --cuda-graphs and both flags timed part by part, and one seed of J so for 40 s.
+#   7. (a third call, if device time is left) the learner and the env's torch parts fused
+#      by torch.compile (--compile-update, --compile-rollout and --compile on the
+#      numba-cuda backend, written 2026-12-07 without a device; on the CPU 367 -> 27
+#      kernels per minibatch step, 218 -> 50 per rollout step): their kernels and time
+#      on the GPU, eager against fused (bench/accel_update.py and bench/accel_rollout.py
+#      --env numba-cuda, 10 seeds), an iteration of J with --cuda-graphs and the three
+#      flags timed part by part, and one seed of J so for 40 s.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
@@ -92,14 +93,16 @@ echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3.tar.gz runs_gpu
 fi
 if [ "$PART" = fused ]; then
-echo "== 7. the learner fused (--compile-update --compile-rollout)"
+echo "== 7. the learner fused (--compile-update --compile-rollout --compile)"
 timeout 120 python3 bench/accel_update.py --device cuda --seeds 10 | tee $OUT/update3.json
-timeout 90 python3 bench/accel_rollout.py --device cuda --seeds 10 | tee $OUT/rollout3.json
+timeout 90 python3 bench/accel_rollout.py --device cuda --seeds 10 --env numba-cuda \
+    | tee $OUT/rollout3.json
 timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs \
-    --compile-update --compile-rollout --iterations 12 | tee $OUT/iteration3_fused.json
+    --compile-update --compile-rollout --compile --iterations 12 | tee $OUT/iteration3_fused.json
 t=$(date +%s.%N)
 timeout 120 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-graphs \
-    --compile-update --compile-rollout --backend numba-cuda --max-seconds 40 --device cuda \
+    --compile-update --compile-rollout --compile --backend numba-cuda --max-seconds 40 \
+    --device cuda \
     --out runs_gpu/single_J_fused
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3_fused.tar.gz runs_gpu/single_J_fused

@@ -136,7 +136,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--device", default="auto", help="cuda, cuda:K, cpu or auto (default)")
     p.add_argument("--out", type=Path, default=Path("runs/ppo_gpu"), help="output folder")
     p.add_argument("--compile", action="store_true",
-                   help="fuse the env's step with torch.compile (compiles at the first step)")
+                   help="fuse the env's torch arithmetic with torch.compile (the torch "
+                        "backend's whole step; a numba backend's copies, masks and resets "
+                        "around its kernel); compiles at the first steps")
     p.add_argument("--backend", default="torch",
                    help="the env's step: torch (default: torch operations), numba (the numba "
                         "env's own row step, CPU) or numba-cuda (that row step compiled for "

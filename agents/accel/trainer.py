@@ -81,8 +81,9 @@ class GpuRun:
     after the first update that ends later than this wall time [s] (counted from
     ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
-    ``compile``: the env's step through ``torch.compile``; ``backend``: the env's step
-    backend (:class:`TorchTetherVecEnv`; the final check runs the torch backend);
+    ``compile``: the env's torch arithmetic through ``torch.compile``; ``backend``: the
+    env's step backend (:class:`TorchTetherVecEnv`, both; the final check runs the torch
+    backend, eager);
     ``cuda_graphs``: the rollout's pieces and the minibatch step captured as CUDA graphs
     and replayed (:mod:`.graphs`; CUDA devices, or the CPU through
     :class:`~.graphs.RecordingCapture` in the tests); ``compile_update``: the minibatch

@@ -96,17 +96,18 @@ def check_backend(backend: str, device: torch.device, dtype=torch.float64,
                   compile: bool = False) -> None:
     """A ValueError unless ``backend`` (:data:`BACKENDS`) can run with these settings.
 
-    ``numba`` (CPU) and ``numba-cuda`` (a CUDA device) run the numba kernel in float64
-    and compile it themselves (no ``compile``).
+    ``numba`` (CPU) and ``numba-cuda`` (a CUDA device) run the numba kernel in float64;
+    ``compile`` then fuses the torch arithmetic around it (any backend, any device).
     """
     if backend not in BACKENDS:
         raise ValueError(f"backend={backend!r} must be one of {BACKENDS}")
+    if not isinstance(compile, bool):
+        raise TypeError(f"compile must be True or False, got {compile!r}")
     if backend == "torch":
         return
-    if compile or dtype != torch.float64:
-        raise ValueError(f"backend={backend!r} runs the numba kernel in float64 and "
-                         f"compiles it itself: compile={compile!r} must be False and "
-                         f"dtype={dtype!r} torch.float64")
+    if dtype != torch.float64:
+        raise ValueError(f"backend={backend!r} runs the numba kernel in float64: "
+                         f"dtype={dtype!r} must be torch.float64")
     if backend == "numba":
         check_cpu(device)
         return
@@ -206,15 +207,18 @@ class TorchTetherVecEnv:
     (torch.float64 or torch.float32), ``seed`` (int or None), ``autoreset_mode``,
     ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
     False: a NaN action turns its row's state non-finite, which terminates it as
-    ``"nonfinite"``), ``compile`` (True: the step's arithmetic, :func:`~.chain.control_step`,
-    runs through ``torch.compile``, fused into few kernels; its first step compiles, tens
-    of seconds), ``backend`` (``"torch"``, default: the step as torch operations;
-    ``"numba"``: the step and the reset's evaluation by the numba env's own row code,
-    :func:`tether_gym.envs.step_kernel.step_row`, compiled by numba, on CPU tensors, one
-    thread; a NaN or inf action then raises ValueError whatever ``check_actions`` says;
-    ``"numba-cuda"``: that row code compiled for the GPU by numba-cuda, one kernel
-    launch per step, CUDA devices only; both float64 and no ``compile``; the draws and
-    the autoreset stay torch's), ``full_info`` (True, default: ``info`` as above;
+    ``"nonfinite"``), ``compile`` (True: the torch backend's step arithmetic,
+    :func:`~.chain.control_step`, runs through ``torch.compile``, fused into few kernels;
+    with a numba backend, the torch arithmetic around its kernel does: the inputs'
+    copies, the results into the rows and the step's outputs, the starts and their
+    writes, bitwise what it computes eagerly; the draws stay eager; the first steps
+    compile, seconds to tens of seconds), ``backend`` (``"torch"``, default: the step as
+    torch operations; ``"numba"``: the step and the reset's evaluation by the numba
+    env's own row code, :func:`tether_gym.envs.step_kernel.step_row`, compiled by numba,
+    on CPU tensors, one thread; a NaN or inf action then raises ValueError whatever
+    ``check_actions`` says; ``"numba-cuda"``: that row code compiled for the GPU by
+    numba-cuda, one kernel launch per step, CUDA devices only; both float64; the draws
+    and the autoreset stay torch's), ``full_info`` (True, default: ``info`` as above;
     False: only the cost entries and, with ``"same_step"``, ``final_obs`` and
     ``final_failure``, which is what a learner reads: 22 torch operations fewer per
     step), and every keyword argument of ``gym.make``.
@@ -270,6 +274,19 @@ class TorchTetherVecEnv:
         else:
             self._control_step = (torch.compile(control_step, dynamic=False) if compile
                                   else control_step)
+        # a numba backend's torch arithmetic around its kernel: the inputs' copies, the
+        # results into the rows and the step's outputs, the starts and their writes;
+        # with compile, each through torch.compile (the draws stay eager)
+        self._load: Any = None if self._kernel is None else self._kernel.load
+        self._kernel_step_end: Callable[[], None] = self._step_end_rows
+        self._start_loaded: Callable[..., dict[str, torch.Tensor]] = self._load_starts
+        self._kernel_reset_end: Callable[[], None] = self._reset_end_rows
+        if compile and self._kernel is not None:
+            (self._load, self._kernel_step_end, self._start_loaded,
+             self._kernel_reset_end) = (
+                torch.compile(f, fullgraph=True, dynamic=False)
+                for f in (self._kernel.load, self._step_end_rows, self._load_starts,
+                          self._reset_end_rows))
         self._plan = StartPlan.of(self.config)
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
@@ -409,7 +426,7 @@ class TorchTetherVecEnv:
         start = self._start_base + unit * self._start_spread
         length = start[:, 2 * n:3 * n]
         nu0 = torch.full((count,), plan.nu0, dtype=self.dtype, device=self.device)
-        ref, dref = plan.ref, plan.dref
+        ref, dref = float(plan.ref), float(plan.dref)  # Python floats (plan's may be numpy's)
         k = 1.0 + ecc * math.cos(plan.nu0)
         # paper Eq. 10 (tasks.reference.periodic_reel_factors) on the reference
         num = (4.0 * ecc * math.sin(plan.nu0) * (1.0 + dref)
@@ -484,12 +501,18 @@ class TorchTetherVecEnv:
         With the torch backend, evaluate it and write it into the rows still pending
         (``reset_end``'s work); with a numba backend, copy it into the kernel's rows.
         """
-        self._attempt = self._start_inputs(self.draws(self.num_envs))
+        draws = self.draws(self.num_envs)
         if self._kernel is None:
+            self._attempt = self._start_inputs(draws)
             self._write_attempt(self._evaluate(self._attempt))
         else:
-            a = self._attempt
-            self._kernel.load_reset(a["nu"], a["y"], a["noise"], a["par"])
+            self._attempt = self._start_loaded(draws)
+
+    def _load_starts(self, draws: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+        """The starts of ``draws`` (:meth:`_start_inputs`), copied into a numba backend's rows."""
+        a = self._start_inputs(draws)
+        self._kernel.load_reset(a["nu"], a["y"], a["noise"], a["par"])
+        return a
 
     def reset_kernel(self) -> None:
         """A reset attempt's numba kernel launch (nothing with the torch backend)."""
@@ -499,7 +522,11 @@ class TorchTetherVecEnv:
     def reset_end(self) -> None:
         """A reset attempt's last part with a numba backend: the start into the rows."""
         if self._kernel is not None:
-            self._write_attempt(self._kernel.reset_result())
+            self._kernel_reset_end()
+
+    def _reset_end_rows(self) -> None:
+        """A numba backend's evaluated starts into the pending rows (:meth:`reset_end`)."""
+        self._write_attempt(self._kernel.reset_result())
 
     def _write_attempt(self, out: dict[str, torch.Tensor]) -> None:
         """The attempt's start into the pending rows; the rows whose start is good leave."""
@@ -602,8 +629,12 @@ class TorchTetherVecEnv:
     def step_end(self) -> None:
         """Third part: a numba backend's results into the state, and :attr:`outputs`."""
         if self._kernel is not None:
-            self._advance_end(self._kernel.result(), self._rows)
-            self._same_step_outputs()
+            self._kernel_step_end()
+
+    def _step_end_rows(self) -> None:
+        """A numba backend's step results into the live rows, and :attr:`outputs`."""
+        self._advance_end(self._kernel.result(), self._rows)
+        self._same_step_outputs()
 
     def step_autoreset(self, begin: Callable[[], None] | None = None,
                        end: Callable[[], None] | None = None) -> None:
@@ -662,7 +693,7 @@ class TorchTetherVecEnv:
         if self._kernel is None:
             self._advance_end(self._control_step(*inputs), rows)
         else:
-            self._kernel.load(*inputs)
+            self._load(*inputs)
 
     def _advance_end(self, out, rows: torch.Tensor) -> None:
         """The step's results ``out`` (:class:`~.chain.TaskStep`) into the live rows."""

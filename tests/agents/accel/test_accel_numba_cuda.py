@@ -29,8 +29,6 @@ def test_backend_refusals():
     assert BACKENDS == ("torch", "numba", "numba-cuda")
     with pytest.raises(ValueError, match="backend='jax' must be one of"):
         TorchTetherVecEnv(2, backend="jax")
-    with pytest.raises(ValueError, match="compile=True must be False"):
-        TorchTetherVecEnv(2, backend="numba-cuda", compile=True)
     with pytest.raises(ValueError, match="dtype=torch.float32"):
         TorchTetherVecEnv(2, backend="numba-cuda", dtype=torch.float32)
     if not numba_cuda.simulated():

@@ -32,3 +32,23 @@ def test_the_fused_rollout_runs_a_fraction_of_the_eager_kernels(bench, tiny, cap
                                          / fused["kernels_per_rollout_step"], 1)
     assert eager["ms_per_rollout_step"] > 0 and fused["ms_per_rollout_step"] > 0
 
+
+
+def test_the_whole_rollout_step_with_a_numba_env(bench, tiny, capsys):
+    """``--env numba``: the learner's whole rollout step on a real env of the numba
+    backend, fused with the env's ``compile=True`` too: more kernels than the rollout's
+    own (the env's draws, copies, masks and resets), and several times fewer fused."""
+    assert bench.main(["--config", str(tiny), "--repeats", "1", "--env", "numba"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["env"] == "numba"
+    eager, fused = out["eager"], out["fused"]
+    assert eager["kernels_per_rollout_step"] >= 180
+    assert dict(fused["most_frequent"])["inductor"] >= 1
+    assert fused["kernels_per_rollout_step"] <= eager["kernels_per_rollout_step"] / 2
+
+
+@pytest.mark.parametrize("env", ["jax", "numba-cuda"])
+def test_a_bad_env_backend_is_refused(bench, tiny, env):
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--config", str(tiny), "--env", env])
+    assert exc.value.code == 2
