@@ -211,7 +211,7 @@ class TorchTetherVecEnv:
     :func:`~.chain.control_step`, runs through ``torch.compile``, fused into few kernels;
     with a numba backend, the torch arithmetic around its kernel does: the inputs'
     copies, the results into the rows and the step's outputs, the starts and their
-    writes, bitwise what it computes eagerly; the draws stay eager; the first steps
+    writes, bitwise what it computes eagerly on the CPU; the draws stay eager; the first steps
     compile, seconds to tens of seconds), ``backend`` (``"torch"``, default: the step as
     torch operations; ``"numba"``: the step and the reset's evaluation by the numba
     env's own row code, :func:`tether_gym.envs.step_kernel.step_row`, compiled by numba,

@@ -18,16 +18,17 @@ def test_the_parts_are_timed_inside_their_iterations(bench, tiny, backend, compi
     """Every part is timed (the numba backend's kernel and end only with it), the parts
     of an iteration add up to no more than its wall time, the config's training time is
     its iterations times run 1's, and the trainer is left as it was; the same with the
-    update and the rollout compiled (``--compile-update --compile-rollout``)."""
+    update, the rollout and the env's torch parts compiled (``--compile-update
+    --compile-rollout --compile``, numba backend)."""
     from tether_gym_agents.accel import trainer
 
     real = (trainer._update, trainer.GraphedCall, trainer.RolloutStep,
             trainer.evaluate_on_device, trainer.Rollout.finish)
-    fused = ["--compile-update", "--compile-rollout"] if compiled else []
+    fused = ["--compile-update", "--compile-rollout", "--compile"] if compiled else []
     assert bench.main(["--config", str(tiny), "--device", "cpu", "--backend", backend,
                        "--iterations", "5", *fused]) == 0
     out = json.loads(capsys.readouterr().out)
-    assert out["compile_update"] is out["compile_rollout"] is compiled
+    assert out["compile_update"] is out["compile_rollout"] is out["compile"] is compiled
     assert (trainer._update, trainer.GraphedCall, trainer.RolloutStep,
             trainer.evaluate_on_device, trainer.Rollout.finish) == real
     parts = out["parts_ms_per_iteration"]
