@@ -34,6 +34,20 @@ MAX_ENVS = 1 << 22
 
 CPU_COMPILERS = ("g++", "c++", "clang++")
 """The C++ compilers one of which torch.compile's CPU code (Inductor) needs."""
+COMPILE_FLAGS = {
+    "--compile": "fuse the env's torch arithmetic with torch.compile (the torch backend's "
+                 "whole step; a numba backend's copies, masks and resets around its "
+                 "kernel); compiles at the first steps",
+    "--compile-update": "fuse each minibatch step's arithmetic with torch.compile (the "
+                        "loss's forward and backward; clipping, Adam and the per-seed "
+                        "rates in one function); compiles at the first update; docs/gpu.md",
+    "--compile-rollout": "fuse the rollout's arithmetic with torch.compile (the policy's "
+                         "half of each step after its draws, the learner's half, the "
+                         "advantages); compiles at the first steps; docs/gpu.md",
+}
+"""The flags that run part of a run through torch.compile, each a
+:class:`~.trainer.GpuRun` field of the same name (``--compile-update``:
+``compile_update``), and their help."""
 
 
 class GpuConfigError(ValueError):
@@ -123,6 +137,11 @@ def read_config(path: Path) -> tuple:
     return PPOSettings(**values), steps, env_kwargs, checkpoints
 
 
+def _field(flag: str) -> str:
+    """A flag's argparse and ``GpuRun`` name: ``--compile-update`` -> ``compile_update``."""
+    return flag[2:].replace("-", "_")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The arguments of ``train.py gpu``."""
     p = argparse.ArgumentParser(prog="train.py gpu",
@@ -135,10 +154,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-envs", type=int, default=None, help="envs per seed")
     p.add_argument("--device", default="auto", help="cuda, cuda:K, cpu or auto (default)")
     p.add_argument("--out", type=Path, default=Path("runs/ppo_gpu"), help="output folder")
-    p.add_argument("--compile", action="store_true",
-                   help="fuse the env's torch arithmetic with torch.compile (the torch "
-                        "backend's whole step; a numba backend's copies, masks and resets "
-                        "around its kernel); compiles at the first steps")
     p.add_argument("--backend", default="torch",
                    help="the env's step: torch (default: torch operations), numba (the numba "
                         "env's own row step, CPU) or numba-cuda (that row step compiled for "
@@ -147,14 +162,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="capture the learner's pieces (the rollout step's two halves, the "
                         "advantages, the minibatch step) as CUDA graphs and replay them "
                         "(CUDA devices only; not yet measured on a GPU: docs/gpu.md)")
-    p.add_argument("--compile-update", action="store_true",
-                   help="fuse each minibatch step's arithmetic with torch.compile (the "
-                        "loss's forward and backward; clipping, Adam and the per-seed rates "
-                        "in one function); compiles at the first update; docs/gpu.md")
-    p.add_argument("--compile-rollout", action="store_true",
-                   help="fuse the rollout's arithmetic with torch.compile (the policy's "
-                        "half of each step after its draws, the learner's half, the "
-                        "advantages); compiles at the first steps; docs/gpu.md")
+    for flag, text in COMPILE_FLAGS.items():
+        p.add_argument(flag, action="store_true", help=text)
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -197,9 +206,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
                        _check_number("--max-seconds", "value", args.max_seconds, 1.0, 1e7))
         device = resolve_device(args.device)
         check_backend(args.backend, device, compile=args.compile)
-        compiles = [flag for flag, on in (("--compile", args.compile),
-                                          ("--compile-update", args.compile_update),
-                                          ("--compile-rollout", args.compile_rollout)) if on]
+        fused = {_field(flag): getattr(args, _field(flag)) for flag in COMPILE_FLAGS}
+        compiles = [flag for flag in COMPILE_FLAGS if fused[_field(flag)]]
         if (compiles and device.type == "cpu"
                 and not any(shutil.which(cxx) for cxx in CPU_COMPILERS)):
             flag = compiles[0]
@@ -220,10 +228,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
     summary = train_seeds(settings, GpuRun(seeds, steps, env_kwargs, args.out, device,
                                            checkpoints=checkpoints, command=command,
                                            clock_start=start, max_seconds=max_seconds,
-                                           compile=args.compile, backend=args.backend,
-                                           cuda_graphs=args.cuda_graphs,
-                                           compile_update=args.compile_update,
-                                           compile_rollout=args.compile_rollout))
+                                           backend=args.backend,
+                                           cuda_graphs=args.cuda_graphs, **fused))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")
