@@ -283,7 +283,8 @@ class RolloutStep:
     A call runs, in this order (the parts of
     :class:`~.vec_env.TorchTetherVecEnv`'s same-step autoreset step):
 
-    1. :meth:`~.rollout.Rollout.act`, its action into the env's ``action_in``, and
+    1. :meth:`~.rollout.Rollout.act` (its clipped action into the env's
+       ``action_in``: :meth:`~.rollout.Rollout.share`), and
        :meth:`~.vec_env.TorchTetherVecEnv.step_begin` (the step's draws; with the
        torch backend the whole step, with a numba backend the copies into its rows);
     2. ``step_kernel``: a numba backend's one kernel launch (nothing with torch);
@@ -293,12 +294,12 @@ class RolloutStep:
        the torch backend its evaluation and its copy into the ended rows),
        ``reset_kernel`` (a numba backend's evaluation), ``reset_end`` (a numba
        backend's copy into the ended rows) and one host sync (whether a start failed);
-    5. the env's outputs into :meth:`~.rollout.Rollout.take`, and
-       :meth:`~.rollout.Rollout.observe`.
+    5. :meth:`~.rollout.Rollout.observe`, which reads the env's outputs where the env
+       left them (:meth:`~.rollout.Rollout.share`).
 
     This is what ``act``, ``env.step``, ``take`` and ``observe`` compute in turn (the
-    env's ``step`` is made of the same parts), without ``step``'s copies of what it
-    returns. With ``graphs``, 1, 3, 5, ``reset_begin`` and ``reset_end`` (the last two
+    env's ``step`` is made of the same parts), without ``step``'s and ``take``'s copies
+    of what it returns. With ``graphs``, 1, 3, 5, ``reset_begin`` and ``reset_end`` (the last two
     only with a numba backend) are each captured as a graph after their warm-up calls
     and replayed (:class:`GraphedCall`); the kernels and the host syncs stay eager. A
     step then costs the host 2 graph launches and a sync (torch backend), or 3
@@ -323,21 +324,17 @@ class RolloutStep:
             raise ValueError(f"RolloutStep needs autoreset_mode='same_step', got "
                              f"{env.autoreset_mode!r}")
         self._env = env
+        o = env.outputs  # the rollout reads the env's step and writes its actions in place
+        rollout.share(env.obs, o.reward, o.terminated, o.truncated, o.final_obs, env.action_in)
 
         def act() -> None:
             rollout.act()
-            env.action_in.copy_(rollout.action.view(env.num_envs, -1))
             env.step_begin()
-
-        def observe() -> None:
-            o = env.outputs
-            rollout.take(env.obs, o.reward, o.terminated, o.truncated, o.final_obs)
-            rollout.observe()
 
         numba = env.backend != "torch"
         self._act: Callable[[], None] = act
         self._end: Callable[[], None] | None = env.step_end if numba else None
-        self._observe: Callable[[], None] = observe
+        self._observe: Callable[[], None] = rollout.observe
         self._reset_begin: Callable[[], None] | None = None  # None: the env's own
         self._reset_end: Callable[[], None] | None = None
         self.parts: list[GraphedCall] = []
@@ -345,7 +342,7 @@ class RolloutStep:
             capture = CudaCapture() if capture is None else capture
             draws = (env.generator,)
             self._act = GraphedCall(act, capture, draws)
-            self._observe = GraphedCall(observe, capture)
+            self._observe = GraphedCall(rollout.observe, capture)
             self._reset_begin = GraphedCall(env.reset_begin, capture, draws)
             self.parts = [self._act, self._observe, self._reset_begin]
             if numba:

@@ -100,11 +100,13 @@ class Rollout:
     obs_stats, ret_stats : RunningStats
         The observation (S, d) and discounted-return (S, 1) statistics.
     action : torch.Tensor
-        (S, N, act) float32: the clipped action :meth:`act` chose, for the env's step.
+        (S, N, act) float32: the clipped action :meth:`act` chose, for the env's step
+        (after :meth:`share`, a view of the env's own action input, in its dtype).
     raw, rew, term, trunc, final_obs : torch.Tensor
-        The env's step, copied in by :meth:`take` for :meth:`observe`: raw observations
-        (S N, d) and rewards (S N,) [float64], ended flags (S N,) [bool], and the last
-        observations of the episodes that ended (S N, d).
+        The env's step, copied in by :meth:`take` for :meth:`observe` (after
+        :meth:`share`, the env's own tensors): raw observations (S N, d) and rewards
+        (S N,), ended flags (S N,) [bool], and the last observations of the episodes
+        that ended (S N, d).
     done_eps, done_fail, done_ret : torch.Tensor
         Per seed since the last :meth:`clear_counts`: episodes ended, episodes failed
         (terminated) and the sum of their raw returns.
@@ -139,6 +141,7 @@ class Rollout:
         self.done_fail = torch.zeros(S, device=device)
         self.done_ret = torch.zeros(S, dtype=f64, device=device)
         self.batch = RolloutBatch(T, S, N, d, a, device)
+        self._shared = False
         self._record: Callable[[torch.Tensor], None] = self.record_step
         self._observe: Callable[[], None] = self.observe_step
         self._finish: Callable[[], None] = self.finish_step
@@ -186,8 +189,37 @@ class Rollout:
         self.buf_val.index_copy_(0, t, policy.value(self.obs)[None])
         self.action.copy_(torch.clamp(act, -1.0, 1.0))
 
+    def share(self, raw, rew, term, trunc, final_obs, action) -> None:
+        """Read the env's step where the env writes it, and act where the env reads.
+
+        ``raw`` .. ``final_obs``: the env's own tensors that a same-step autoreset step
+        leaves its step in (``TorchTetherVecEnv.obs`` and ``outputs``: (S N, d),
+        (S N,), ...); ``action``: its action input (S N, act). From then on
+        :meth:`observe` reads the first five where they are, instead of :meth:`take`'s
+        copies of them, and :meth:`act` writes the clipped actions into ``action`` (cast
+        to its dtype): six copies fewer per rollout step, and the same numbers (a copy
+        and a cast are exact). Call it once, before the first :meth:`act`; the tensors
+        must stay in their storage for the run (the env's do).
+        """
+        S, N, d = self.obs.shape
+        a = self.action.shape[-1]
+        for name, t, shape in (("raw", raw, (S * N, d)), ("rew", rew, (S * N,)),
+                               ("term", term, (S * N,)), ("trunc", trunc, (S * N,)),
+                               ("final_obs", final_obs, (S * N, d)),
+                               ("action", action, (S * N, a))):
+            if tuple(t.shape) != shape or t.device != self.obs.device:
+                raise ValueError(f"share: {name} must have shape {shape} on "
+                                 f"{self.obs.device}, got {tuple(t.shape)} on {t.device}")
+        self.raw, self.rew, self.term, self.trunc, self.final_obs = (
+            raw, rew, term, trunc, final_obs)
+        self.action = action.view(S, N, a)
+        self._shared = True
+
     def take(self, raw, rew, term, trunc, final_obs) -> None:
         """Copy the env's step (``TorchTetherVecEnv.step`` in same-step autoreset) in."""
+        if self._shared:
+            raise RuntimeError("take() after share(): observe() reads the env's own "
+                               "tensors, which take() would overwrite")
         for dst, src in ((self.raw, raw), (self.rew, rew), (self.term, term),
                          (self.trunc, trunc), (self.final_obs, final_obs)):
             dst.copy_(src)

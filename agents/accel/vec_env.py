@@ -209,9 +209,10 @@ class TorchTetherVecEnv:
     False: a NaN action turns its row's state non-finite, which terminates it as
     ``"nonfinite"``), ``compile`` (True: the torch backend's step arithmetic,
     :func:`~.chain.control_step`, runs through ``torch.compile``, fused into few kernels;
-    with a numba backend, the torch arithmetic around its kernel does: the inputs'
-    copies, the results into the rows and the step's outputs, the starts and their
-    writes, bitwise what it computes eagerly on the CPU; the draws stay eager; the first steps
+    with a numba backend, the torch arithmetic around its kernel does: the step's
+    disturbance and noise and the starts made of their draws, the inputs' copies, the
+    results into the rows and the step's outputs, the starts' writes, bitwise what it
+    computes eagerly on the CPU; the draws themselves stay eager; the first steps
     compile, seconds to tens of seconds), ``backend`` (``"torch"``, default: the step as
     torch operations; ``"numba"``: the step and the reset's evaluation by the numba
     env's own row code, :func:`tether_gym.envs.step_kernel.step_row`, compiled by numba,
@@ -274,20 +275,23 @@ class TorchTetherVecEnv:
         else:
             self._control_step = (torch.compile(control_step, dynamic=False) if compile
                                   else control_step)
-        # a numba backend's torch arithmetic around its kernel: the inputs' copies, the
-        # results into the rows and the step's outputs, the starts and their writes;
-        # with compile, each through torch.compile (the draws stay eager)
-        self._load: Any = None if self._kernel is None else self._kernel.load
+        # a numba backend's torch arithmetic around its kernel: the step's inputs (its
+        # rows, its disturbance and noise from the draws, the copies into the kernel's
+        # rows), the results into the rows and the step's outputs, the starts and their
+        # writes; with compile, each through torch.compile (the draws stay eager)
+        self._load_step: Callable[..., None] = self._load_rows
         self._kernel_step_end: Callable[[], None] = self._step_end_rows
         self._start_loaded: Callable[..., dict[str, torch.Tensor]] = self._load_starts
         self._kernel_reset_end: Callable[[], None] = self._reset_end_rows
         if compile and self._kernel is not None:
-            (self._load, self._kernel_step_end, self._start_loaded,
-             self._kernel_reset_end) = (
-                torch.compile(f, fullgraph=True, dynamic=False)
-                for f in (self._kernel.load, self._step_end_rows, self._load_starts,
-                          self._reset_end_rows))
+            pieces: tuple[Any, ...] = (self._load_rows, self._step_end_rows,
+                                       self._load_starts, self._reset_end_rows)
+            (self._load_step, self._kernel_step_end, self._start_loaded,
+             self._kernel_reset_end) = (torch.compile(f, fullgraph=True, dynamic=False)
+                                        for f in pieces)
         self._plan = StartPlan.of(self.config)
+        # the step's disturbance bound [-] and observation noise [-] (_step_draws)
+        self._draw_scales = (float(self.config.disturbance), float(self.config.obs_noise))
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
                                    if seed is None else int(seed))
@@ -375,21 +379,38 @@ class TorchTetherVecEnv:
         The same quantities the numba env draws from numpy (``ChainBatch._draw_rows``),
         by the same formulas (``low + (high - low) u``); absent ones are None.
         """
+        return self._scale_draws(self._unit_draws(count))
+
+    def _unit_draws(self, count: int) -> dict[str, torch.Tensor | None]:
+        """:meth:`draws` before its scaling: uniforms in [0, 1) and standard normals."""
         plan, n, g = self._plan, self.n, self.generator
         def rand(*shape):
             return (torch.rand(shape, generator=g, dtype=self.dtype,
                                                   device=self.device))
         out: dict[str, Any] = {"ecc": None, "scale": None, "gauss": None}
         if plan.eccentricity_range is not None:
-            lo, hi = plan.eccentricity_range
-            out["ecc"] = lo + (hi - lo) * rand(count)
+            out["ecc"] = rand(count)
         if plan.mass_range is not None:
-            r = plan.mass_range
-            out["scale"] = (1.0 - r) + ((1.0 + r) - (1.0 - r)) * rand(count, n)
-        out["unit"] = -1.0 + (1.0 - -1.0) * rand(count, 3 * n)
+            out["scale"] = rand(count, n)
+        out["unit"] = rand(count, 3 * n)
         if plan.obs_noise > 0.0:
             out["gauss"] = torch.randn((count, 4 * n), generator=g, dtype=self.dtype,
                                        device=self.device)
+        return out
+
+    def _scale_draws(self, u: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
+        """:meth:`draws` from its uniforms and normals ``u`` (:meth:`_unit_draws`)."""
+        plan = self._plan
+        out: dict[str, Any] = {"ecc": None, "scale": None, "gauss": u["gauss"]}
+        ecc, scale, unit = u["ecc"], u["scale"], u["unit"]
+        if ecc is not None and plan.eccentricity_range is not None:
+            lo, hi = (float(x) for x in plan.eccentricity_range)  # Python floats
+            out["ecc"] = lo + (hi - lo) * ecc
+        if scale is not None and plan.mass_range is not None:
+            r = float(plan.mass_range)
+            out["scale"] = (1.0 - r) + ((1.0 + r) - (1.0 - r)) * scale
+        assert unit is not None  # always drawn
+        out["unit"] = -1.0 + (1.0 - -1.0) * unit
         return out
 
     def start(self, draws: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
@@ -501,16 +522,19 @@ class TorchTetherVecEnv:
         With the torch backend, evaluate it and write it into the rows still pending
         (``reset_end``'s work); with a numba backend, copy it into the kernel's rows.
         """
-        draws = self.draws(self.num_envs)
+        draws = self._unit_draws(self.num_envs)  # scaled in _load_starts with a numba backend
         if self._kernel is None:
-            self._attempt = self._start_inputs(draws)
+            self._attempt = self._start_inputs(self._scale_draws(draws))
             self._write_attempt(self._evaluate(self._attempt))
         else:
             self._attempt = self._start_loaded(draws)
 
-    def _load_starts(self, draws: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
-        """The starts of ``draws`` (:meth:`_start_inputs`), copied into a numba backend's rows."""
-        a = self._start_inputs(draws)
+    def _load_starts(self, draws: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
+        """The starts of ``draws`` (:meth:`_unit_draws`), copied into a numba backend's rows.
+
+        The draws are scaled here (:meth:`_scale_draws`), then :meth:`_start_inputs`.
+        """
+        a = self._start_inputs(self._scale_draws(draws))
         self._kernel.load_reset(a["nu"], a["y"], a["noise"], a["par"])
         return a
 
@@ -616,8 +640,7 @@ class TorchTetherVecEnv:
         if self.autoreset_mode != "same_step" or not self._was_reset:
             raise RuntimeError(f"the step's parts need autoreset_mode='same_step' (got "
                                f"{self.autoreset_mode!r}) and a reset() first")
-        torch.logical_not(self._autoreset, out=self._rows)
-        self._advance_begin(self.action_in, self._rows, draw=True)
+        self._advance_begin(self.action_in, None, draw=True)  # the rows that did not end
         if self._kernel is None:
             self._same_step_outputs()
 
@@ -674,26 +697,57 @@ class TorchTetherVecEnv:
             self._kernel.launch()
             self._advance_end(self._kernel.result(), rows)
 
-    def _advance_begin(self, a: torch.Tensor, rows: torch.Tensor, draw: bool) -> None:
-        """The draws, then the torch step and its results, or a numba kernel's inputs."""
-        cfg = self.config
-        g = self.generator
+    def _advance_begin(self, a: torch.Tensor, rows: torch.Tensor | None, draw: bool) -> None:
+        """The draws, then the torch step and its results, or a numba kernel's inputs.
+
+        ``rows`` None: the rows that did not end (``~_autoreset``, into ``_rows``), the
+        same-step autoreset's step. The uniform and normal draws are made here, eagerly;
+        what is made of them (:meth:`_step_draws`) runs with the numba backends' copies
+        into their rows, through torch.compile with ``compile``.
+        """
+        cfg, g = self.config, self.generator
+        unit = gauss = None
         if draw and cfg.disturbance > 0.0:
-            d = cfg.disturbance
             unit = torch.rand(self.disturbance.shape, generator=g, dtype=self.dtype,
                               device=self.device)
-            torch.where(rows[:, None], -d + (d - -d) * unit, self.disturbance,
-                        out=self.disturbance)
         if draw and cfg.obs_noise > 0.0:
             gauss = torch.randn(self.noise.shape, generator=g, dtype=self.dtype,
                                 device=self.device)
-            torch.where(rows[:, None], cfg.obs_noise * gauss + self._bias, self.noise,
-                        out=self.noise)
-        inputs = (self.nu, self.y, self.u, a, self.disturbance, self.noise, self.par)
         if self._kernel is None:
-            self._advance_end(self._control_step(*inputs), rows)
+            rows = self._live_rows(rows)
+            self._step_draws(rows, unit, gauss)
+            self._advance_end(self._control_step(self.nu, self.y, self.u, a, self.disturbance,
+                                                 self.noise, self.par), rows)
         else:
-            self._load(*inputs)
+            self._load_step(a, rows, unit, gauss)
+
+    def _live_rows(self, rows: torch.Tensor | None) -> torch.Tensor:
+        """``rows``, or with None the rows that did not end, written into ``_rows``."""
+        if rows is None:
+            return torch.logical_not(self._autoreset, out=self._rows)
+        return rows
+
+    def _step_draws(self, rows: torch.Tensor, unit: torch.Tensor | None,
+                    gauss: torch.Tensor | None) -> None:
+        """The step's disturbance and noise of the rows ``rows``, from its draws.
+
+        ``unit`` (num_envs, n): uniforms in [0, 1), the disturbance -d + 2 d unit;
+        ``gauss`` (num_envs, 4n): standard normals, the noise obs_noise gauss + bias.
+        None keeps the rows' values (no draw).
+        """
+        d, sigma = self._draw_scales  # Python floats (torch.compile reads no EnvConfig)
+        if unit is not None:
+            torch.where(rows[:, None], -d + (d - -d) * unit, self.disturbance,
+                        out=self.disturbance)
+        if gauss is not None:
+            torch.where(rows[:, None], sigma * gauss + self._bias, self.noise,
+                        out=self.noise)
+
+    def _load_rows(self, a: torch.Tensor, rows: torch.Tensor | None,
+                   unit: torch.Tensor | None, gauss: torch.Tensor | None) -> None:
+        """A numba backend's step inputs (:meth:`_advance_begin`), into its kernel's rows."""
+        self._step_draws(self._live_rows(rows), unit, gauss)
+        self._kernel.load(self.nu, self.y, self.u, a, self.disturbance, self.noise, self.par)
 
     def _advance_end(self, out, rows: torch.Tensor) -> None:
         """The step's results ``out`` (:class:`~.chain.TaskStep`) into the live rows."""

@@ -120,26 +120,44 @@ def test_the_action_draws_are_normal_samples():
     assert torch.equal(rollout.buf_obs[0], rollout.obs) and int(rollout.t) == 0
 
 
-def _rollout_run(compiled: bool):
+def _rollout_run(compiled: bool, shared: bool = False):
     """Two iterations of 6 steps, 2 seeds x 4 envs, on made-up env steps with ended and
-    truncated rows; the rollout's state and batch after them."""
+    truncated rows; the rollout's state and batch after them. The observations are
+    float32 values, as the env's. ``shared``: the rollout reads made-up env tensors in
+    place (:meth:`Rollout.share`: float32 observations, a float64 action input) that
+    each step writes, instead of :meth:`Rollout.take`'s copies."""
     S, N, T, d, a = 2, 4, 6, 5, 2
     s = PPOSettings(n_envs=N, n_steps=T, gamma=0.9, gae_lambda=0.8, net_arch=(8, 8),
                     log_std_init=-1.0)
     policy = MultiSeedPolicy([1, 2], d, a, s, "cpu")
     rollout = Rollout(policy, s, d, a, "cpu", compiled=compiled)
+    env = (torch.zeros((S * N, d)), torch.zeros(S * N, dtype=torch.float64),
+           torch.zeros(S * N, dtype=torch.bool), torch.zeros(S * N, dtype=torch.bool),
+           torch.zeros((S * N, d)), torch.zeros((S * N, a), dtype=torch.float64))
+    if shared:
+        rollout.share(*env)
     g = torch.Generator().manual_seed(3)
     torch.manual_seed(7)
-    rollout.start(3.0 * torch.randn((S * N, d), generator=g, dtype=torch.float64))
+
+    def observation() -> torch.Tensor:
+        return (3.0 * torch.randn((S * N, d), generator=g, dtype=torch.float64)).float()
+
+    rollout.start(observation().double())
     for _ in range(2):
         for _ in range(T):
             rollout.act()
-            raw = 3.0 * torch.randn((S * N, d), generator=g, dtype=torch.float64)
+            raw = observation()
             rew = torch.randn(S * N, generator=g, dtype=torch.float64)
             ended = torch.rand(S * N, generator=g) < 0.3
             trunc = ended & (torch.rand(S * N, generator=g) < 0.5)
-            final = torch.randn((S * N, d), generator=g, dtype=torch.float64)
-            rollout.take(raw, rew, ended & ~trunc, trunc, final)
+            final = torch.randn((S * N, d), generator=g, dtype=torch.float64).float()
+            step = (raw, rew, ended & ~trunc, trunc, final)
+            if shared:  # the env writes its step where it always does
+                for dst, src in zip(env, step, strict=False):
+                    dst.copy_(src)
+                assert torch.equal(env[5], rollout.action.view(S * N, a))  # act wrote it
+            else:
+                rollout.take(*step)
             rollout.observe()
         rollout.finish()
     stats = (rollout.obs_stats.mean, rollout.obs_stats.var, rollout.obs_stats.count,
@@ -170,3 +188,37 @@ def test_the_compiled_rollout_is_the_eager_one():
     for x, y in zip(got[1] + got[2][:2], want[1] + want[2][:2], strict=True):
         torch.testing.assert_close(x, y, rtol=1e-5, atol=1e-5 * float(y.abs().max()))
     assert torch.equal(got[2][2], want[2][2]) and got[3] == want[3] == 0
+
+
+@torch.no_grad()
+def test_a_shared_rollout_is_the_copying_one():
+    """:meth:`Rollout.share` (as ``RolloutStep`` uses it: no copies of the env's step,
+    the actions written into the env's float64 input): two iterations end with bitwise
+    the statistics, counts, batch, observations and start flags of :meth:`Rollout.take`'s
+    copies, and the actions cast exactly."""
+    want = _rollout_run(compiled=False)
+    got = _rollout_run(compiled=False, shared=True)
+    for x, y in zip(got[0] + got[1], want[0] + want[1], strict=True):
+        assert x.dtype == y.dtype and torch.equal(x, y)
+    (obs, act, start), (obs0, act0, start0) = got[2], want[2]
+    assert act.dtype == torch.float64 and act0.dtype == torch.float32
+    assert torch.equal(obs, obs0) and torch.equal(act, act0.double())
+    assert torch.equal(start, start0) and got[3] == want[3] == 0
+    assert float(want[0][7].sum()) > 0  # episodes ended
+
+
+def test_share_refuses_wrong_tensors_and_take_after_it():
+    S, N, d, a = 2, 3, 4, 2
+    s = PPOSettings(n_envs=N, n_steps=2, net_arch=(8,))
+    rollout = Rollout(MultiSeedPolicy([0, 1], d, a, s, "cpu"), s, d, a, "cpu")
+    good = [torch.zeros((S * N, d)), torch.zeros(S * N, dtype=torch.float64),
+            torch.zeros(S * N, dtype=torch.bool), torch.zeros(S * N, dtype=torch.bool),
+            torch.zeros((S * N, d)), torch.zeros((S * N, a), dtype=torch.float64)]
+    bad = list(good)
+    bad[5] = torch.zeros((S * N, a + 1), dtype=torch.float64)
+    with pytest.raises(ValueError, match=r"action must have shape \(6, 2\) on cpu, got "
+                                         r"\(6, 3\)"):
+        rollout.share(*bad)
+    rollout.share(*good)
+    with pytest.raises(RuntimeError, match="take\\(\\) after share\\(\\)"):
+        rollout.take(*good[:5])

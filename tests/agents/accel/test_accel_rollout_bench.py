@@ -37,14 +37,22 @@ def test_the_fused_rollout_runs_a_fraction_of_the_eager_kernels(bench, tiny, cap
 def test_the_whole_rollout_step_with_a_numba_env(bench, tiny, capsys):
     """``--env numba``: the learner's whole rollout step on a real env of the numba
     backend, fused with the env's ``compile=True`` too: more kernels than the rollout's
-    own (the env's draws, copies, masks and resets), and several times fewer fused."""
+    own (the env's draws, masks and resets), and several times fewer fused. The rollout
+    reads the env's step where the env leaves it and writes its actions where the env
+    reads them (no copies either way): fused, a step's eager operations are the
+    actions' draw and the matrix products (the tiny config's env draws no disturbance
+    and no noise), besides the resets' draws and the autoreset's host reads."""
     assert bench.main(["--config", str(tiny), "--repeats", "1", "--env", "numba"]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["env"] == "numba"
     eager, fused = out["eager"], out["fused"]
-    assert eager["kernels_per_rollout_step"] >= 180
-    assert dict(fused["most_frequent"])["inductor"] >= 1
-    assert fused["kernels_per_rollout_step"] <= eager["kernels_per_rollout_step"] / 2
+    assert eager["kernels_per_rollout_step"] >= 150
+    names = dict(fused["most_frequent"])
+    assert names["inductor"] >= 1
+    assert names["randn"] >= 1
+    # copies and masks only in the resets (a fraction of the steps), none per step
+    assert all(names.get(op, 0) < 1 for op in ("copy", "where", "logical_not"))
+    assert fused["kernels_per_rollout_step"] <= eager["kernels_per_rollout_step"] / 3
 
 
 @pytest.mark.parametrize("env", ["jax", "numba-cuda"])
