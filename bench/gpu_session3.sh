@@ -38,15 +38,15 @@
 #   7. (a third call, if device time is left) the learner and the env's torch parts fused
 #      by torch.compile (--compile-update, --compile-rollout and --compile on the
 #      numba-cuda backend, written 2026-12-07 without a device; on the CPU 367 -> 27
-#      kernels per minibatch step, 218 -> 50 per rollout step): their kernels and time
+#      kernels per minibatch step, 218 -> 35 per rollout step): their kernels and time
 #      on the GPU, eager against fused (bench/accel_update.py and bench/accel_rollout.py
-#      --env numba-cuda, 10 seeds), an iteration of J with --cuda-graphs and the three
-#      flags timed part by part, and one seed of J so for 40 s.
+#      --env numba-cuda, 10 seeds), an iteration of J with the three flags timed part by
+#      part, without and with --cuda-graphs, and one seed of J with all four for 40 s.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
 #   bash bench/gpu_session3.sh train       # steps 4-6 (at most 550 s; about 6 minutes)
-#   bash bench/gpu_session3.sh fused       # step 7 (at most 420 s; about 4 minutes)
+#   bash bench/gpu_session3.sh fused       # step 7 (at most 510 s; about 5 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -97,6 +97,10 @@ echo "== 7. the learner fused (--compile-update --compile-rollout --compile)"
 timeout 120 python3 bench/accel_update.py --device cuda --seeds 10 | tee $OUT/update3.json
 timeout 90 python3 bench/accel_rollout.py --device cuda --seeds 10 --env numba-cuda \
     | tee $OUT/rollout3.json
+# the flags without graphs first: their CUDA capture (a compiled function's kernels inside
+# torch.cuda.graph) is the one combination the CPU tests cannot reach
+timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda \
+    --compile-update --compile-rollout --compile --iterations 12 | tee $OUT/iteration3_compiled.json
 timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs \
     --compile-update --compile-rollout --compile --iterations 12 | tee $OUT/iteration3_fused.json
 t=$(date +%s.%N)

@@ -239,7 +239,7 @@ class Rollout:
         S, N, d = self.obs.shape
         rew, term, trunc = self.rew.view(S, N), self.term.view(S, N), self.trunc.view(S, N)
         done = term | trunc
-        obs_raw = self.raw.view(S, N, d)
+        obs_raw = self.raw.view(S, N, d).to(self.obs_stats.mean.dtype)  # cast once
         self.obs_stats.update(obs_raw)
         self.obs.copy_(normalize(obs_raw, self.obs_stats, s))
         scaled, returns = scale_rewards(rew, done, self.returns, self.ret_stats, s)
