@@ -56,7 +56,7 @@ def _run(config: Path, device: torch.device, iterations: int, parts: bool,
     """``iterations`` iterations of ``train_seeds``; per iteration {part or "total": s}.
 
     ``options``: :class:`~tether_gym_agents.accel.trainer.GpuRun`'s ``backend``,
-    ``cuda_graphs``, ``compile``, ``compile_update`` and ``compile_rollout``.
+    ``cuda_graphs``, ``compile``, ``compile_update``, ``compile_rollout`` and ``sync_free``.
     """
     from tether_gym_agents.accel import trainer
     from tether_gym_agents.accel.cli import read_config
@@ -177,6 +177,8 @@ def main(argv=None) -> int:
     p.add_argument("--compile-rollout", action="store_true",
                    help="as train.py gpu --compile-rollout (compiled at the first "
                         "iteration, which is not timed)")
+    p.add_argument("--sync-free", action="store_true",
+                   help="as train.py gpu --sync-free (the autoreset without host syncs)")
     p.add_argument("--iterations", type=int, default=12)
     args = p.parse_args(argv)
     if args.iterations < FIRST_TIMED:
@@ -194,7 +196,7 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     options = {"backend": args.backend, "cuda_graphs": args.cuda_graphs,
                "compile": args.compile, "compile_update": args.compile_update,
-               "compile_rollout": args.compile_rollout}
+               "compile_rollout": args.compile_rollout, "sync_free": args.sync_free}
     print(json.dumps(measure(args.config, device, args.iterations, options)), flush=True)
     return 0
 

@@ -3,6 +3,7 @@
     python bench/accel_ops.py                        # configs/gpu_ppo.yml, both CPU backends
     python bench/accel_ops.py --config experiments/issue34/cfg/L.yml --backend numba
     python bench/accel_ops.py --backend numba --cuda-graphs   # what the host launches
+    python bench/accel_ops.py --backend numba --cuda-graphs --sync-free
 
 On a GPU a small batch costs its kernel launches, not its arithmetic (the eager torch
 step ran in the same 21 ms from 4k to 262k envs on the H200 of 2026-12-04, docs/gpu.md).
@@ -94,7 +95,7 @@ def _in_phase(counter: Count, phase: str, fn):
 
 
 def _run(settings, env_kwargs, backend: str, iterations: int,
-         graphs: bool = False) -> tuple[Count, int]:
+         graphs: bool = False, sync_free: bool = False) -> tuple[Count, int]:
     """The operations of one whole ``train_seeds`` call, and its minibatch steps.
 
     Phases: ``update`` (``_update`` less the optimizer), ``adam`` (``Adam.step``),
@@ -110,7 +111,8 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     ``graphs``: ``--cuda-graphs``, its captures kept by ``RecordingCapture`` on the CPU
     with the CPU's fused Adam (whose step count stays on the device, as with CUDA's
     capturable Adam). A replay counts as one operation (``graph_replay``): what the host
-    launches; the operations inside it are not counted.
+    launches; the operations inside it are not counted. ``sync_free``: ``train.py gpu
+    --sync-free`` (the autoreset without host syncs).
     """
     from tether_gym_agents.accel import graphs as graph_module
     from tether_gym_agents.accel import trainer
@@ -169,7 +171,7 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
         with tempfile.TemporaryDirectory() as out, counter:
             run = GpuRun([0], iterations * settings.n_steps * settings.n_envs, env_kwargs,
                          Path(out), torch.device("cpu"), checkpoints=1, eval_episodes=1,
-                         backend=backend, cuda_graphs=graphs)
+                         backend=backend, cuda_graphs=graphs, sync_free=sync_free)
             train_seeds(settings, run, log=None)
     finally:
         (trainer._update, trainer.evaluate_on_device, adam_class.step,
@@ -181,7 +183,8 @@ def _run(settings, env_kwargs, backend: str, iterations: int,
     return counter, minibatches[0]
 
 
-def count(config: Path, backend: str, iterations: int, graphs: bool = False) -> dict:
+def count(config: Path, backend: str, iterations: int, graphs: bool = False,
+          sync_free: bool = False) -> dict:
     """Operations per rollout step and per minibatch step, from two runs' difference.
 
     A run of ``iterations`` iterations and one of twice as many: the difference of their
@@ -191,8 +194,8 @@ def count(config: Path, backend: str, iterations: int, graphs: bool = False) -> 
     from tether_gym_agents.accel.cli import read_config
 
     settings, _, env_kwargs = read_config(config)[:3]
-    one, mb_one = _run(settings, env_kwargs, backend, iterations, graphs)
-    two, mb_two = _run(settings, env_kwargs, backend, 2 * iterations, graphs)
+    one, mb_one = _run(settings, env_kwargs, backend, iterations, graphs, sync_free)
+    two, mb_two = _run(settings, env_kwargs, backend, 2 * iterations, graphs, sync_free)
     per_iteration = two.ops.copy()
     per_iteration.subtract(one.ops)
     phases = two.by_phase()
@@ -210,7 +213,7 @@ def count(config: Path, backend: str, iterations: int, graphs: bool = False) -> 
     in_updates = (per_update + per_adam) * minibatches
     top = Counter({k: v // iterations for k, v in per_iteration.items() if v > 0})
     return {"config": str(config), "backend": backend, "cuda_graphs": graphs,
-            "iterations": iterations,
+            "sync_free": sync_free, "iterations": iterations,
             "n_steps": settings.n_steps, "minibatches_per_iteration": minibatches,
             "ops_per_rollout_step": round(per_step, 1),
             "of_which_env_step": round(per_env, 1),
@@ -235,6 +238,8 @@ def main(argv=None) -> int:
     p.add_argument("--iterations", type=int, default=4)
     p.add_argument("--cuda-graphs", action="store_true",
                    help="count train.py gpu --cuda-graphs: a graph's replay is one launch")
+    p.add_argument("--sync-free", action="store_true",
+                   help="count train.py gpu --sync-free (the autoreset without host syncs)")
     args = p.parse_args(argv)
     if args.iterations < 1:
         p.error(f"--iterations must be >= 1, got {args.iterations}")
@@ -246,8 +251,8 @@ def main(argv=None) -> int:
         p.error(f"--config {str(args.config)!r} is not a file")
     torch.set_num_threads(1)
     for backend in args.backend:
-        print(json.dumps(count(args.config, backend, args.iterations, args.cuda_graphs)),
-              flush=True)
+        print(json.dumps(count(args.config, backend, args.iterations, args.cuda_graphs,
+                               args.sync_free)), flush=True)
     return 0
 
 

@@ -3,6 +3,7 @@
     python bench/accel_rollout.py                      # configs/gpu_ppo.yml (J), 1 seed
     python bench/accel_rollout.py --seeds 10 --device cuda
     python bench/accel_rollout.py --env numba         # the whole rollout step, a real env
+    python bench/accel_rollout.py --env numba --sync-free  # its autoreset without syncs
 
 A rollout step of the learner is the policy's half (:meth:`~tether_gym_agents.accel.
 rollout.Rollout.act`: the action draws, the actions, their records), the env's step and
@@ -45,10 +46,11 @@ from accel_update import cli, kernels_and_time, summary  # noqa: E402
 
 
 def measure(config: Path, device: torch.device, seeds: int, repeats: int,
-            env: str | None = None) -> dict:
+            env: str | None = None, sync_free: bool = False) -> dict:
     """The module docstring's figures for the config's rollout, eager and fused.
 
-    ``env``: None (made-up env steps) or the backend of a real env.
+    ``env``: None (made-up env steps) or the backend of a real env; ``sync_free``: that
+    env's autoreset without host syncs.
     """
     from tether_gym_agents.accel.cli import read_config
     from tether_gym_agents.accel.graphs import RolloutStep
@@ -86,7 +88,8 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int,
         else:
             real = TorchTetherVecEnv(S * N, device=device, seed=S, backend=env,
                                      autoreset_mode="same_step", check_actions=False,
-                                     compile=fused, full_info=False, **env_kwargs)
+                                     compile=fused, full_info=False, sync_free=sync_free,
+                                     **env_kwargs)
             rollout.start(real.reset()[0])
             step = RolloutStep(rollout, real)
 
@@ -98,7 +101,8 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int,
 
         out["fused" if fused else "eager"] = kernels_and_time(
             iteration, device, repeats, T, "rollout_step", "first_iteration_s")
-    return summary(config, device, seeds, out, "rollout_step", env=env, envs_per_seed=N,
+    return summary(config, device, seeds, out, "rollout_step", env=env, sync_free=sync_free,
+                   envs_per_seed=N,
                    rollout_steps_per_iteration=T, repeats=repeats)
 
 

@@ -178,7 +178,8 @@ def cli(measure_fn, description: str, what: str, argv=None, env: bool = False) -
 
     ``measure_fn(config, device, seeds, repeats)`` gives the JSON line; ``what`` names
     what ``--seeds`` and ``--repeats`` count in the help. ``env``: an ``--env BACKEND``
-    option too, checked on the device and passed on as ``env=``.
+    option too, checked on the device and passed on as ``env=``, and ``--sync-free``
+    (with ``--env``), passed on as ``sync_free=``.
     """
     from tether_gym_agents.accel.vec_env import check_backend, resolve_device
 
@@ -191,12 +192,17 @@ def cli(measure_fn, description: str, what: str, argv=None, env: bool = False) -
         p.add_argument("--env", default=None, metavar="BACKEND",
                        help="step a real env of this backend (numba on the CPU, numba-cuda "
                             "or torch) instead of made-up steps")
+        p.add_argument("--sync-free", action="store_true",
+                       help="with --env: its autoreset without host syncs (train.py gpu "
+                            "--sync-free)")
     args = p.parse_args(argv)
     for name, value, high in (("--seeds", args.seeds, 64), ("--repeats", args.repeats, 1000)):
         if not 1 <= value <= high:
             p.error(f"{name} must be in [1, {high}], got {value}")
     if not args.config.is_file():
         p.error(f"--config {str(args.config)!r} is not a file")
+    if env and args.sync_free and args.env is None:
+        p.error("--sync-free needs --env BACKEND (a real env)")
     try:
         device = resolve_device(args.device)
         if env and args.env is not None:
@@ -204,7 +210,7 @@ def cli(measure_fn, description: str, what: str, argv=None, env: bool = False) -
     except (ValueError, ImportError) as exc:
         p.error(str(exc))
     torch.set_num_threads(1)
-    kwargs = {"env": args.env} if env else {}
+    kwargs = {"env": args.env, "sync_free": args.sync_free} if env else {}
     print(json.dumps(measure_fn(args.config, device, args.seeds, args.repeats, **kwargs)),
           flush=True)
     return 0

@@ -164,6 +164,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(CUDA devices only; not yet measured on a GPU: docs/gpu.md)")
     for flag, text in COMPILE_FLAGS.items():
         p.add_argument(flag, action="store_true", help=text)
+    p.add_argument("--sync-free", action="store_true",
+                   help="the env's autoreset without host syncs: one reset attempt every "
+                        "step, a failed start not drawn again in its step (docs/gpu.md), "
+                        "so that the host does not wait for the device at each step")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
                         "included); the runs record the steps reached")
@@ -229,7 +233,8 @@ def main(argv=None, clock_start: float | None = None) -> int:
                                            checkpoints=checkpoints, command=command,
                                            clock_start=start, max_seconds=max_seconds,
                                            backend=args.backend,
-                                           cuda_graphs=args.cuda_graphs, **fused))
+                                           cuda_graphs=args.cuda_graphs,
+                                           sync_free=args.sync_free, **fused))
     print(f"train.py gpu: done, {summary['steps_per_seed']} steps per seed in "
           f"{summary['wall_time_s']:.1f} s ({summary['env_steps_per_s']:,.0f} env steps/s "
           "over all seeds, start-up included)")

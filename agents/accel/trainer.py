@@ -91,7 +91,10 @@ class GpuRun:
     backward graphs, and the clipping, Adam and per-seed rates in one function);
     ``compile_rollout``: the rollout's arithmetic fused by ``torch.compile`` (the policy's
     half of a step after its eager draws, the learner's half and the advantages:
-    :class:`~.rollout.Rollout` with ``compiled``).
+    :class:`~.rollout.Rollout` with ``compiled``); ``sync_free``: the env's autoreset
+    without host syncs (:class:`TorchTetherVecEnv`'s ``sync_free``: one reset attempt
+    every step, a failed start starts failed), so that the host queues the rollout's
+    steps without waiting for the device.
     """
 
     seeds: list[int]
@@ -109,6 +112,7 @@ class GpuRun:
     cuda_graphs: bool = False
     compile_update: bool = False
     compile_rollout: bool = False
+    sync_free: bool = False
 
 
 def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
@@ -127,7 +131,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
                             autoreset_mode="same_step", check_actions=False,
                             compile=run.compile, backend=run.backend, full_info=False,
-                            **env_kwargs)
+                            sync_free=run.sync_free, **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's rate scales its Adam step instead (see _minibatch_step), so that the

@@ -201,6 +201,20 @@ class TorchTetherVecEnv:
     failed and terminates at its first step with reward 0. Reset options are not
     supported (the native env has them).
 
+    ## Without host syncs (``sync_free=True``)
+
+    With ``"same_step"``, the autoreset normally asks the device whether any row ended
+    (a host sync per step) and whether any start failed (one per attempt). With
+    ``sync_free`` it asks nothing: every step makes one reset attempt, whether or not a
+    row ended (a start drawn for every row, written into the rows that ended, nothing
+    written where none did), so the host can queue step after step. Two things differ
+    from the default: the generator draws the starts every step (other numbers for the
+    same seed, the same distributions), and a failed start is not drawn again in its
+    step: the row starts failed, as a row whose every draw failed (it terminates at its
+    first step with reward 0 and the start's failure code), and is reset with a new draw
+    in that step. On the training distribution of ``configs/gpu_ppo.yml`` no start of 10^6
+    drawn failed.
+
     ## Arguments
 
     ``num_envs`` (>= 1), ``device`` ("cpu", "cuda", "cuda:K" or "auto"), ``dtype``
@@ -222,13 +236,14 @@ class TorchTetherVecEnv:
     and the autoreset stay torch's), ``full_info`` (True, default: ``info`` as above;
     False: only the cost entries and, with ``"same_step"``, ``final_obs`` and
     ``final_failure``, which is what a learner reads: 22 torch operations fewer per
-    step), and every keyword argument of ``gym.make``.
+    step), ``sync_free`` (False, default; True needs ``"same_step"``: see above), and
+    every keyword argument of ``gym.make``.
     """
 
     def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
                  autoreset_mode: str = "next_step", check_actions: bool = True,
                  compile: bool = False, backend: str = "torch", full_info: bool = True,
-                 **env_kwargs):
+                 sync_free: bool = False, **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
                             f"{num_envs!r}")
@@ -241,6 +256,11 @@ class TorchTetherVecEnv:
                              f"{AUTORESET_MODES}")
         if not isinstance(full_info, bool):
             raise TypeError(f"full_info must be True or False, got {full_info!r}")
+        if not isinstance(sync_free, bool):
+            raise TypeError(f"sync_free must be True or False, got {sync_free!r}")
+        if sync_free and autoreset_mode != "same_step":
+            raise ValueError(f"sync_free=True needs autoreset_mode='same_step', got "
+                             f"{autoreset_mode!r}")
         if STATE.names != ("theta", "dtheta", "length", "dlength"):
             raise RuntimeError(f"the torch step assumes the state order theta, dtheta, "
                                f"length, dlength, not {STATE.names}")
@@ -253,6 +273,7 @@ class TorchTetherVecEnv:
         self.autoreset_mode = autoreset_mode
         self.check_actions = bool(check_actions)
         self.full_info = full_info
+        self.sync_free = sync_free
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.cc = chain_consts(self.config, self.device, dtype)
@@ -290,8 +311,11 @@ class TorchTetherVecEnv:
              self._kernel_reset_end) = (torch.compile(f, fullgraph=True, dynamic=False)
                                         for f in pieces)
         self._plan = StartPlan.of(self.config)
-        # the step's disturbance bound [-] and observation noise [-] (_step_draws)
+        # Python floats for the compiled pieces, which guard on numpy scalars by reading
+        # them (a host read per call): the step's disturbance bound and observation noise
+        # (_step_draws), theta_d and theta_d' at the start (_start_inputs; plan's are numpy's)
         self._draw_scales = (float(self.config.disturbance), float(self.config.obs_noise))
+        self._reference_start = (float(self._plan.ref), float(self._plan.dref))
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
                                    if seed is None else int(seed))
@@ -447,7 +471,7 @@ class TorchTetherVecEnv:
         start = self._start_base + unit * self._start_spread
         length = start[:, 2 * n:3 * n]
         nu0 = torch.full((count,), plan.nu0, dtype=self.dtype, device=self.device)
-        ref, dref = float(plan.ref), float(plan.dref)  # Python floats (plan's may be numpy's)
+        ref, dref = self._reference_start
         k = 1.0 + ecc * math.cos(plan.nu0)
         # paper Eq. 10 (tasks.reference.periodic_reel_factors) on the reference
         num = (4.0 * ecc * math.sin(plan.nu0) * (1.0 + dref)
@@ -562,6 +586,9 @@ class TorchTetherVecEnv:
         torch.where(self._pending, still, self._start_failed, out=self._start_failed)
         self._pending.copy_(still)
         torch.any(self._pending, out=self._any_pending)
+        if self.sync_free:  # no second draw: a failed start starts failed (class docstring)
+            torch.where(self._pending, self._start_failure(), self._start_code,
+                        out=self._start_code)
 
     def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
         """Copy the start ``s`` into the rows of the mask ``rows`` (in place)."""
@@ -665,9 +692,14 @@ class TorchTetherVecEnv:
 
         Reads the flag and the rows that :meth:`step_end` (the torch backend:
         :meth:`step_begin`) left. ``begin``, ``end``: :meth:`reset_begin` and
-        :meth:`reset_end` captured as graphs.
+        :meth:`reset_end` captured as graphs. With ``sync_free``: one reset attempt,
+        whether or not a row ended, and no host sync (the class docstring).
         """
-        if bool(self._any_ended):
+        if self.sync_free:
+            (self.reset_begin if begin is None else begin)()
+            self.reset_kernel()
+            (self.reset_end if end is None else end)()
+        elif bool(self._any_ended):
             self._reset_rows(None, begin, end)
 
     def _same_step_outputs(self) -> None:

@@ -151,6 +151,21 @@ def test_compile_on_the_numba_backend_trains_bitwise_the_eager_run(tmp_path):
     assert eager.keys() == fused.keys() and all((fused[k] == eager[k]).all() for k in eager)
 
 
+def test_sync_free_trains_on_both_backends_and_compiles_bitwise(tmp_path):
+    """``--sync-free`` (the autoreset without host syncs): the numba backend trains the
+    torch backend's weights, as without the flag, and ``--compile`` on the numba backend
+    (the failed starts' codes then inside a compiled piece) the eager run's, bitwise; the
+    command is recorded with the run."""
+    tiny = ("--n-envs", "8", "--timesteps", "1024", "--sync-free")
+    torch_run = _trained(tmp_path / "torch", *tiny)
+    eager = _trained(tmp_path / "eager", *tiny, "--backend", "numba")
+    fused = _trained(tmp_path / "fused", *tiny, "--backend", "numba", "--compile")
+    assert all((fused[k] == eager[k]).all() for k in eager)
+    for name, w in torch_run.items():
+        assert (eager[name] - w).abs().max() <= 1e-6 * (1.0 + w.abs().max()), name
+    assert "--sync-free" in (tmp_path / "fused" / "seed_0" / "command.txt").read_text()
+
+
 @pytest.mark.parametrize("flag", ["--compile", "--compile-update", "--compile-rollout"])
 def test_compiling_on_a_cpu_without_a_compiler_is_one_line(tmp_path, capsys, monkeypatch,
                                                           flag):

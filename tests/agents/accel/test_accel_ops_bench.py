@@ -10,10 +10,12 @@ def accel_ops(load_bench):
 
 @pytest.fixture(scope="module")
 def counts(accel_ops, tiny):
-    """(backend, iterations) -> the script's figures for the tiny config."""
+    """(backend, iterations[, graphs[, sync_free]]) -> the script's figures for the tiny
+    config."""
     return {key: accel_ops.count(tiny, *key) for key in
             (("numba", 1), ("numba", 2), ("torch", 1), ("numba", 4, True),
-             ("torch", 4, True))}
+             ("torch", 4, True), ("numba", 1, False, True), ("numba", 4, True, True),
+             ("torch", 4, True, True))}
 
 
 def test_counts_are_per_iteration_and_add_up(counts):
@@ -67,3 +69,21 @@ def test_with_cuda_graphs_the_host_launches_replays_a_kernel_and_a_sync(counts):
     assert 2 <= graphed["of_which_env_step"] < 3 and 1 <= torch_graphed["of_which_env_step"] < 2
     assert 1 <= graphed["host_syncs_per_rollout_step"] < 1.5
     assert graphed["ops_per_iteration"] < eager["ops_per_iteration"] / 20
+
+
+def test_sync_free_rollout_steps_read_nothing_back(counts):
+    """``--sync-free``: no host sync in a rollout step, eager or graphed. Graphed, the
+    env's eager part of a step is then the numba kernel and a reset attempt in every
+    step (its two replays around its kernel; the torch backend: its one replay), the
+    rollout's own part as without the flag. Eager, the attempt in every step costs more
+    operations than the default's attempts in the steps where an episode ended."""
+    eager = counts["numba", 1, False, True]
+    graphed, torch_graphed = counts["numba", 4, True, True], counts["torch", 4, True, True]
+    for c in (eager, graphed, torch_graphed):
+        assert c["sync_free"] and c["host_syncs_per_rollout_step"] == 0
+    assert counts["numba", 1]["host_syncs_per_rollout_step"] > 0
+    assert graphed["of_which_env_step"] == 4.0 and torch_graphed["of_which_env_step"] == 1.0
+    assert abs(graphed["ops_per_rollout_step"] - 4.0 - 3.0625) < 0.1
+    assert abs(torch_graphed["ops_per_rollout_step"] - 1.0 - 2.0625) < 0.1
+    assert eager["of_which_env_step"] > counts["numba", 1]["of_which_env_step"]
+    assert eager["ops_per_minibatch_step"] == counts["numba", 1]["ops_per_minibatch_step"]

@@ -60,3 +60,20 @@ def test_a_bad_env_backend_is_refused(bench, tiny, env):
     with pytest.raises(SystemExit) as exc:
         bench.main(["--config", str(tiny), "--env", env])
     assert exc.value.code == 2
+
+
+def test_a_sync_free_env_and_its_refusal(bench, tiny, capsys):
+    """``--env numba --sync-free``: the env's autoreset without host syncs (a reset attempt
+    every step): recorded in the line, fused still several times fewer kernels and no
+    host read (``item``) among them; ``--sync-free`` without ``--env`` is refused."""
+    assert bench.main(["--config", str(tiny), "--repeats", "1", "--env", "numba",
+                       "--sync-free"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["env"] == "numba" and out["sync_free"] is True
+    eager, fused = out["eager"], out["fused"]
+    assert "item" not in dict(fused["most_frequent"]) and "item" not in dict(
+        eager["most_frequent"])
+    assert fused["kernels_per_rollout_step"] <= eager["kernels_per_rollout_step"] / 3
+    with pytest.raises(SystemExit) as exc:
+        bench.main(["--config", str(tiny), "--sync-free"])
+    assert exc.value.code == 2

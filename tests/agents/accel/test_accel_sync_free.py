@@ -1,0 +1,187 @@
+"""``TorchTetherVecEnv(sync_free=True)`` and ``train.py gpu --sync-free``: the same-step
+autoreset without host syncs (one reset attempt every step)."""
+
+from __future__ import annotations
+
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from torch.utils._python_dispatch import TorchDispatchMode  # noqa: E402
+
+from tether_gym_agents.accel.vec_env import TorchTetherVecEnv  # noqa: E402
+
+# 6-step episodes, with disturbance and noise drawn every step
+SHORT = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
+         "obs_noise": 0.001, "init_theta_range": 0.15, "eccentricity_range": (0.0, 0.3),
+         "mass_range": 0.25}
+B = 6
+
+
+class _Syncs(TorchDispatchMode):
+    """Counts the reads of a tensor back to the host (``_local_scalar_dense``)."""
+
+    def __init__(self):
+        super().__init__()
+        self.count = 0
+
+    def __torch_dispatch__(self, func, types, args=(), kwargs=None):
+        if func.overloadpacket.__name__ == "_local_scalar_dense":
+            self.count += 1
+        return func(*args, **(kwargs or {}))
+
+
+def _env(backend: str, sync_free: bool = True, **kwargs) -> TorchTetherVecEnv:
+    env = TorchTetherVecEnv(B, seed=11, autoreset_mode="same_step", check_actions=False,
+                            backend=backend, full_info=False, sync_free=sync_free,
+                            **{**SHORT, **kwargs})
+    env.reset()
+    env.nu[::2] += env._plan.episode_length / 2  # half the rows half an episode ahead
+    return env
+
+
+def _actions(steps: int) -> list:
+    g = torch.Generator().manual_seed(5)
+    return [torch.rand((B, 2), generator=g, dtype=torch.float64) * 2.0 - 1.0
+            for _ in range(steps)]
+
+
+def _parts(env: TorchTetherVecEnv, a) -> None:
+    """One step through its parts, as the learner's RolloutStep calls them."""
+    env.action_in.copy_(a)
+    env.step_begin()
+    env.step_kernel()
+    env.step_end()
+    env.step_autoreset()
+
+
+@pytest.mark.parametrize("backend", ["torch", "numba"])
+def test_every_step_draws_one_start_per_row_and_resets_the_ended_rows(backend):
+    """Over 40 steps (6-step episodes, rows out of step: some steps end no episode), each
+    step draws its disturbance and noise, then one start for every row, whether or not
+    a row ended: the generator ends each step where those draws leave it. The rows that
+    ended hold the start ``env.start`` makes of that step's draws (state, parameters,
+    noise, command, tensions, observation: bitwise); the other rows keep the step's own
+    state (the observation is the step's last one)."""
+    env = _env(backend)
+    num, n = env.num_envs, env.n
+    ended_steps = quiet_steps = 0
+    for a in _actions(40):
+        replay = torch.Generator().set_state(env.generator.get_state())
+        obs, _, term, trunc, info = env.step(a)
+        ended = term | trunc
+        # the step's draws, then the reset attempt's, from the state before the step
+        torch.rand((num, n), generator=replay, dtype=torch.float64)
+        torch.randn((num, 4 * n), generator=replay, dtype=torch.float64)
+        own = env.generator
+        env.generator = replay
+        try:
+            starts = env.start(env.draws(num))
+        finally:
+            env.generator = own
+        assert torch.equal(replay.get_state(), env.generator.get_state())
+        for name, key in (("y", "y"), ("par", "par"), ("noise", "noise"), ("u", "u"),
+                          ("tension", "tension"), ("derivative", "derivative")):
+            assert torch.equal(getattr(env, name)[ended], starts[key][ended]), name
+        assert torch.equal(obs[ended], starts["obs"][ended])
+        assert torch.equal(obs[~ended], info["final_obs"][~ended])
+        assert bool((env.steps[ended] == 0).all()) and bool((env.steps[~ended] > 0).all())
+        ended_steps += bool(ended.any())
+        quiet_steps += not bool(ended.any())
+    assert ended_steps >= 10 and quiet_steps >= 5
+
+
+@pytest.mark.parametrize("backend", ["torch", "numba"])
+def test_the_step_reads_nothing_back(backend):
+    """The step's parts with ``sync_free`` read no tensor back to the host over 30 steps
+    with resets (the default autoreset reads at least one flag per step)."""
+    counts = {}
+    for sync_free in (False, True):
+        env = _env(backend, sync_free)
+        with _Syncs() as syncs:
+            for a in _actions(30):
+                _parts(env, a)
+        counts[sync_free] = syncs.count
+    assert counts[True] == 0 and counts[False] >= 30
+
+
+def test_a_failed_start_starts_failed_and_is_drawn_again_at_its_first_step(monkeypatch):
+    """Row 1's every start fails, row 4's whenever its first angle is drawn positive: the
+    row starts failed (no second draw in the step), terminates at its next step with
+    reward 0 and the failure code of its start, and is reset in that step; row 4 also
+    gets good starts. The other rows run as usual."""
+    env = _env("torch")
+    real = env._start_result
+    rows = torch.arange(B)
+
+    def start_result(inp, out):
+        s = real(inp, out)
+        bad = (rows == 1) | ((rows == 4) & (inp["y"][:, 0] > 0.0))
+        return {**s, "ok": s["ok"] & ~bad}
+
+    env._start_result = start_result
+    failed_before = torch.zeros(B, dtype=torch.bool)
+    seen = {1: 0, 4: 0}
+    good_four = 0
+    for a in _actions(60):
+        _, reward, term, trunc, info = env.step(a)
+        ended = term | trunc
+        # a row that started failed ends at its first step, with reward 0 and its code
+        assert bool(term[failed_before].all())
+        assert bool((reward[failed_before] == 0.0).all())
+        assert bool((info["final_failure"][failed_before] > 0).all())
+        for row in seen:
+            seen[row] += int(failed_before[row])
+        good_four += int(ended[4] & ~env._start_failed[4])
+        failed_before = env._start_failed & ended
+        assert bool(failed_before[1]) == bool(ended[1])  # row 1 never starts well
+    assert seen[1] >= 20 and seen[4] >= 2 and good_four >= 2
+    assert not bool(env._start_failed[[0, 2, 3, 5]].any())
+
+
+def test_sync_free_refusals():
+    with pytest.raises(TypeError, match="sync_free must be True or False, got 1"):
+        TorchTetherVecEnv(2, autoreset_mode="same_step", sync_free=1)
+    with pytest.raises(ValueError, match="sync_free=True needs autoreset_mode='same_step', "
+                                         "got 'next_step'"):
+        TorchTetherVecEnv(2, sync_free=True)
+
+
+@pytest.mark.parametrize("backend", ["torch", "numba"])
+def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monkeypatch,
+                                                                  backend):
+    """``train_seeds`` with ``sync_free`` and every graph of ``--cuda-graphs`` captured and
+    replayed through RecordingCapture on the CPU (the reset attempt's graphs replayed
+    every step): five iterations end with bitwise the eager sync-free run's weights and
+    episode counts; and the sync-free run is not the default run (other draws)."""
+    from tether_gym_agents.accel import graphs
+    from tether_gym_agents.accel.graphs import RecordingCapture
+    from tether_gym_agents.accel.ppo import PPOSettings
+    from tether_gym_agents.accel.trainer import GpuRun, train_seeds
+    from tether_gym_agents.files.safe_format import load_agent
+
+    real_adam = torch.optim.Adam
+    monkeypatch.setattr(torch.optim, "Adam",
+                        lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
+    monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
+    settings = PPOSettings(n_envs=4, n_steps=8, batch_size=16, n_epochs=2,
+                           net_arch=(16, 16))
+    env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
+                  "obs_noise": 0.001}
+    out = {}
+    for name, graphed, sync_free in (("default", False, False), ("eager", False, True),
+                                     ("graphed", True, True)):
+        run = GpuRun([0, 1], 5 * 8 * 4, env_kwargs, tmp_path / name, torch.device("cpu"),
+                     checkpoints=5, eval_episodes=2, backend=backend, cuda_graphs=graphed,
+                     sync_free=sync_free)
+        summary = train_seeds(settings, run, log=None)
+        out[name] = (summary, [load_agent(tmp_path / name / f"seed_{k}")[0].state_dict()
+                               for k in (0, 1)])
+    (eager, w_eager), (graphed, w_graphed) = out["eager"], out["graphed"]
+    assert sum(sum(h["episodes"]) for h in eager["history"]) >= 10
+    for key in ("episodes", "failed", "mean_return"):
+        assert [h[key] for h in eager["history"]] == [h[key] for h in graphed["history"]]
+    for state_e, state_g in zip(w_eager, w_graphed, strict=True):
+        assert all(torch.equal(state_e[k], state_g[k]) for k in state_e)
+    w_default = out["default"][1]
+    assert any(not torch.equal(w_default[0][k], w_eager[0][k]) for k in w_eager[0])
