@@ -41,12 +41,13 @@
 #      kernels per minibatch step, 218 -> 35 per rollout step): their kernels and time
 #      on the GPU, eager against fused (bench/accel_update.py and bench/accel_rollout.py
 #      --env numba-cuda, 10 seeds), an iteration of J with the three flags timed part by
-#      part, without and with --cuda-graphs, and one seed of J with all four for 40 s.
+#      part, without and with --cuda-graphs, and with --sync-free too (the autoreset
+#      without host syncs, 2026-12-07), and one seed of J with all five for 40 s.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as two calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
 #   bash bench/gpu_session3.sh train       # steps 4-6 (at most 550 s; about 6 minutes)
-#   bash bench/gpu_session3.sh fused       # step 7 (at most 510 s; about 5 minutes)
+#   bash bench/gpu_session3.sh fused       # step 7 (at most 570 s; about 5 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -94,8 +95,8 @@ tar czf $OUT/runs3.tar.gz runs_gpu
 fi
 if [ "$PART" = fused ]; then
 echo "== 7. the learner fused (--compile-update --compile-rollout --compile)"
-timeout 120 python3 bench/accel_update.py --device cuda --seeds 10 | tee $OUT/update3.json
-timeout 90 python3 bench/accel_rollout.py --device cuda --seeds 10 --env numba-cuda \
+timeout 100 python3 bench/accel_update.py --device cuda --seeds 10 | tee $OUT/update3.json
+timeout 80 python3 bench/accel_rollout.py --device cuda --seeds 10 --env numba-cuda \
     | tee $OUT/rollout3.json
 # the flags without graphs first: their CUDA capture (a compiled function's kernels inside
 # torch.cuda.graph) is the one combination the CPU tests cannot reach
@@ -103,10 +104,14 @@ timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda \
     --compile-update --compile-rollout --compile --iterations 12 | tee $OUT/iteration3_compiled.json
 timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs \
     --compile-update --compile-rollout --compile --iterations 12 | tee $OUT/iteration3_fused.json
+# and without the autoreset's host syncs (--sync-free: one reset attempt every step)
+timeout 90 python3 bench/accel_iteration.py --device cuda --backend numba-cuda --cuda-graphs \
+    --compile-update --compile-rollout --compile --sync-free --iterations 12 \
+    | tee $OUT/iteration3_sync_free.json
 t=$(date +%s.%N)
 timeout 120 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-graphs \
-    --compile-update --compile-rollout --compile --backend numba-cuda --max-seconds 40 \
-    --device cuda \
+    --compile-update --compile-rollout --compile --sync-free --backend numba-cuda \
+    --max-seconds 40 --device cuda \
     --out runs_gpu/single_J_fused
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3_fused.tar.gz runs_gpu/single_J_fused
