@@ -86,10 +86,10 @@ def measure(config: Path, device: torch.device, seeds: int, repeats: int,
                     rollout.observe()
                 rollout.finish()
         else:
+            mode = "same_step_sync_free" if sync_free else "same_step"
             real = TorchTetherVecEnv(S * N, device=device, seed=S, backend=env,
-                                     autoreset_mode="same_step", check_actions=False,
-                                     compile=fused, full_info=False, sync_free=sync_free,
-                                     **env_kwargs)
+                                     autoreset_mode=mode, check_actions=False,
+                                     compile=fused, full_info=False, **env_kwargs)
             rollout.start(real.reset()[0])
             step = RolloutStep(rollout, real)
 

@@ -311,7 +311,8 @@ class RolloutStep:
     rollout : Rollout
         The learner's rollout (:class:`~.rollout.Rollout`).
     env : TorchTetherVecEnv
-        Its env, with ``autoreset_mode="same_step"``, reset; with ``graphs`` its
+        Its env, with ``autoreset_mode="same_step"`` (or ``"same_step_sync_free"``),
+        reset; with ``graphs`` its
         generator is registered with the graph that draws (1).
     graphs : bool
         Capture and replay 1, 3 and 5 (default False: call them).
@@ -320,9 +321,9 @@ class RolloutStep:
     """
 
     def __init__(self, rollout, env, graphs: bool = False, capture=None):
-        if env.autoreset_mode != "same_step":
-            raise ValueError(f"RolloutStep needs autoreset_mode='same_step', got "
-                             f"{env.autoreset_mode!r}")
+        if not env.same_step:
+            raise ValueError(f"RolloutStep needs autoreset_mode='same_step' or "
+                             f"'same_step_sync_free', got {env.autoreset_mode!r}")
         self._env = env
         o = env.outputs  # the rollout reads the env's step and writes its actions in place
         rollout.share(env.obs, o.reward, o.terminated, o.truncated, o.final_obs, env.action_in)

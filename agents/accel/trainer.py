@@ -92,9 +92,9 @@ class GpuRun:
     ``compile_rollout``: the rollout's arithmetic fused by ``torch.compile`` (the policy's
     half of a step after its eager draws, the learner's half and the advantages:
     :class:`~.rollout.Rollout` with ``compiled``); ``sync_free``: the env's autoreset
-    without host syncs (:class:`TorchTetherVecEnv`'s ``sync_free``: one reset attempt
-    every step, a failed start starts failed), so that the host queues the rollout's
-    steps without waiting for the device.
+    without host syncs (:class:`TorchTetherVecEnv`'s ``"same_step_sync_free"``: one
+    reset attempt every step, a failed start starts failed), so that the host queues
+    the rollout's steps without waiting for the device.
     """
 
     seeds: list[int]
@@ -128,10 +128,11 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     t0 = time.perf_counter() if clock_start is None else clock_start
     S, N, T = len(seeds), settings.n_envs, settings.n_steps
     torch.manual_seed(int(seeds[0]))
+    autoreset = "same_step_sync_free" if run.sync_free else "same_step"
     env = TorchTetherVecEnv(S * N, device=device, seed=int(seeds[0]) * 7919 + S,
-                            autoreset_mode="same_step", check_actions=False,
+                            autoreset_mode=autoreset, check_actions=False,
                             compile=run.compile, backend=run.backend, full_info=False,
-                            sync_free=run.sync_free, **env_kwargs)
+                            **env_kwargs)
     d, a = env.observation_dim, env.n
     policy = MultiSeedPolicy(seeds, d, a, settings, device)
     # lr 1: each seed's rate scales its Adam step instead (see _minibatch_step), so that the

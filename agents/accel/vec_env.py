@@ -36,7 +36,7 @@ BACKENDS = ("torch", "numba", "numba-cuda")
 numba env's own compiled row step on CPU tensors (:class:`.row_step.NumbaCpuStep`);
 ``numba-cuda``: that row step compiled for a CUDA GPU (:mod:`.numba_cuda`)."""
 
-AUTORESET_MODES = ("next_step", "same_step")
+AUTORESET_MODES = ("next_step", "same_step", "same_step_sync_free")
 """``next_step``: gymnasium's default, as the native vector env; ``same_step``: an ended
 sub-env is reset within the step that ended it, its last observation in
 ``info["final_obs"]`` (stable-baselines3's convention, what the GPU learner uses)."""
@@ -179,18 +179,20 @@ class TorchTetherVecEnv:
     episode for the ended rows (stable-baselines3's ``terminal_observation``). The
     returned reward and the cost entries of ``info`` are the step's, as in
     ``next_step`` (a failure's last step costs >= 1), not the reset's zeros; the other
-    ``info`` entries are the reset's.
+    ``info`` entries are the reset's. ``"same_step_sync_free"``: the same, with an
+    autoreset that reads nothing back to the host (below).
 
     ## The step's parts (for CUDA graphs)
 
-    With ``"same_step"``, ``step`` is :meth:`step_begin` (the draws; the torch backend's
-    whole step), :meth:`step_kernel` (a numba backend's launch), :meth:`step_end` (its
-    results into the state) and :meth:`step_autoreset` (a host sync, then reset
-    attempts of :meth:`reset_begin`, :meth:`reset_kernel`, :meth:`reset_end` and a
-    sync each), reading the actions from ``action_in`` and leaving the step's outputs
-    in ``outputs`` (:class:`StepOutputs`) and ``obs``. Every tensor of the env stays in
-    the storage it was made in, updated in place, so that a learner can capture the
-    parts without a host sync or a numba launch as CUDA graphs and replay them
+    With a same-step mode, ``step`` is :meth:`step_begin` (the draws; the torch
+    backend's whole step), :meth:`step_kernel` (a numba backend's launch),
+    :meth:`step_end` (its results into the state) and :meth:`step_autoreset` (a host
+    sync, then reset attempts of :meth:`reset_begin`, :meth:`reset_kernel`,
+    :meth:`reset_end` and a sync each; without syncs, one attempt), reading the actions
+    from ``action_in`` and leaving the step's outputs in ``outputs``
+    (:class:`StepOutputs`) and ``obs``. Every tensor of the env stays in the storage it
+    was made in, updated in place, so that a learner can capture the parts without a
+    host sync or a numba launch as CUDA graphs and replay them
     (:class:`~.graphs.RolloutStep`); ``step`` itself returns copies.
 
     ## Starting state
@@ -201,19 +203,20 @@ class TorchTetherVecEnv:
     failed and terminates at its first step with reward 0. Reset options are not
     supported (the native env has them).
 
-    ## Without host syncs (``sync_free=True``)
+    ## Without host syncs (``autoreset_mode="same_step_sync_free"``)
 
-    With ``"same_step"``, the autoreset normally asks the device whether any row ended
-    (a host sync per step) and whether any start failed (one per attempt). With
-    ``sync_free`` it asks nothing: every step makes one reset attempt, whether or not a
-    row ended (a start drawn for every row, written into the rows that ended, nothing
-    written where none did), so the host can queue step after step. Two things differ
-    from the default: the generator draws the starts every step (other numbers for the
-    same seed, the same distributions), and a failed start is not drawn again in its
-    step: the row starts failed, as a row whose every draw failed (it terminates at its
-    first step with reward 0 and the start's failure code), and is reset with a new draw
-    in that step. On the training distribution of ``configs/gpu_ppo.yml`` no start of 10^6
-    drawn failed.
+    With ``"same_step"``, the autoreset asks the device whether any row ended (a host
+    sync per step) and whether any start failed (one per attempt).
+    ``"same_step_sync_free"`` is ``"same_step"`` that asks nothing (``sync_free`` True):
+    every step makes one reset attempt, whether or not a row ended (a start drawn for
+    every row, written into the rows that ended, nothing written where none did), so the
+    host can queue step after step. Two things differ from ``"same_step"``: the generator
+    draws the starts every step (other numbers for the same seed, the same
+    distributions), and a failed start is not drawn again in its step: the row starts
+    failed, as a row whose every draw failed (it terminates at its first step with
+    reward 0 and the start's failure code), and is reset with a new draw in that step.
+    On the training distribution of ``configs/gpu_ppo.yml`` no start of 10^6 drawn
+    failed.
 
     ## Arguments
 
@@ -236,14 +239,13 @@ class TorchTetherVecEnv:
     and the autoreset stay torch's), ``full_info`` (True, default: ``info`` as above;
     False: only the cost entries and, with ``"same_step"``, ``final_obs`` and
     ``final_failure``, which is what a learner reads: 22 torch operations fewer per
-    step), ``sync_free`` (False, default; True needs ``"same_step"``: see above), and
-    every keyword argument of ``gym.make``.
+    step), and every keyword argument of ``gym.make``.
     """
 
     def __init__(self, num_envs: int, device="cpu", dtype=torch.float64, seed: int | None = None,
                  autoreset_mode: str = "next_step", check_actions: bool = True,
                  compile: bool = False, backend: str = "torch", full_info: bool = True,
-                 sync_free: bool = False, **env_kwargs):
+                 **env_kwargs):
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
             raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
                             f"{num_envs!r}")
@@ -256,11 +258,6 @@ class TorchTetherVecEnv:
                              f"{AUTORESET_MODES}")
         if not isinstance(full_info, bool):
             raise TypeError(f"full_info must be True or False, got {full_info!r}")
-        if not isinstance(sync_free, bool):
-            raise TypeError(f"sync_free must be True or False, got {sync_free!r}")
-        if sync_free and autoreset_mode != "same_step":
-            raise ValueError(f"sync_free=True needs autoreset_mode='same_step', got "
-                             f"{autoreset_mode!r}")
         if STATE.names != ("theta", "dtheta", "length", "dlength"):
             raise RuntimeError(f"the torch step assumes the state order theta, dtheta, "
                                f"length, dlength, not {STATE.names}")
@@ -273,7 +270,9 @@ class TorchTetherVecEnv:
         self.autoreset_mode = autoreset_mode
         self.check_actions = bool(check_actions)
         self.full_info = full_info
-        self.sync_free = sync_free
+        # same-step autoreset, and without host syncs (the class docstring)
+        self.same_step = autoreset_mode != "next_step"
+        self.sync_free = autoreset_mode == "same_step_sync_free"
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.cc = chain_consts(self.config, self.device, dtype)
@@ -630,7 +629,7 @@ class TorchTetherVecEnv:
                 rows = torch.nonzero(bad).flatten().tolist()
                 raise ValueError(f"actions must be finite (no NaN or inf); rows {rows} are not")
         self.action_in.copy_(a)  # in the state's dtype
-        if self.autoreset_mode == "same_step":
+        if self.same_step:
             self.step_begin()
             self.step_kernel()
             self.step_end()
@@ -662,11 +661,12 @@ class TorchTetherVecEnv:
 
         The torch backend does the whole step here (and :meth:`step_end`'s work); a
         numba backend copies the inputs into its kernel's rows, for :meth:`step_kernel`.
-        Needs ``autoreset_mode="same_step"`` and a prior :meth:`reset`; no host sync.
+        Needs a same-step autoreset mode and a prior :meth:`reset`; no host sync.
         """
-        if self.autoreset_mode != "same_step" or not self._was_reset:
-            raise RuntimeError(f"the step's parts need autoreset_mode='same_step' (got "
-                               f"{self.autoreset_mode!r}) and a reset() first")
+        if not self.same_step or not self._was_reset:
+            raise RuntimeError(f"the step's parts need autoreset_mode='same_step' or "
+                               f"'same_step_sync_free' (got {self.autoreset_mode!r}) and "
+                               f"a reset() first")
         self._advance_begin(self.action_in, None, draw=True)  # the rows that did not end
         if self._kernel is None:
             self._same_step_outputs()
@@ -692,8 +692,8 @@ class TorchTetherVecEnv:
 
         Reads the flag and the rows that :meth:`step_end` (the torch backend:
         :meth:`step_begin`) left. ``begin``, ``end``: :meth:`reset_begin` and
-        :meth:`reset_end` captured as graphs. With ``sync_free``: one reset attempt,
-        whether or not a row ended, and no host sync (the class docstring).
+        :meth:`reset_end` captured as graphs. With ``"same_step_sync_free"``: one reset
+        attempt, whether or not a row ended, and no host sync (the class docstring).
         """
         if self.sync_free:
             (self.reset_begin if begin is None else begin)()

@@ -1,5 +1,6 @@
-"""``TorchTetherVecEnv(sync_free=True)`` and ``train.py gpu --sync-free``: the same-step
-autoreset without host syncs (one reset attempt every step)."""
+"""``TorchTetherVecEnv(autoreset_mode="same_step_sync_free")`` and ``train.py gpu
+--sync-free``: the same-step autoreset without host syncs (one reset attempt every
+step)."""
 
 from __future__ import annotations
 
@@ -32,9 +33,9 @@ class _Syncs(TorchDispatchMode):
 
 
 def _env(backend: str, sync_free: bool = True, **kwargs) -> TorchTetherVecEnv:
-    env = TorchTetherVecEnv(B, seed=11, autoreset_mode="same_step", check_actions=False,
-                            backend=backend, full_info=False, sync_free=sync_free,
-                            **{**SHORT, **kwargs})
+    mode = "same_step_sync_free" if sync_free else "same_step"
+    env = TorchTetherVecEnv(B, seed=11, autoreset_mode=mode, check_actions=False,
+                            backend=backend, full_info=False, **{**SHORT, **kwargs})
     env.reset()
     env.nu[::2] += env._plan.episode_length / 2  # half the rows half an episode ahead
     return env
@@ -139,12 +140,26 @@ def test_a_failed_start_starts_failed_and_is_drawn_again_at_its_first_step(monke
     assert not bool(env._start_failed[[0, 2, 3, 5]].any())
 
 
-def test_sync_free_refusals():
-    with pytest.raises(TypeError, match="sync_free must be True or False, got 1"):
-        TorchTetherVecEnv(2, autoreset_mode="same_step", sync_free=1)
-    with pytest.raises(ValueError, match="sync_free=True needs autoreset_mode='same_step', "
-                                         "got 'next_step'"):
-        TorchTetherVecEnv(2, sync_free=True)
+def test_the_modes_flags_and_refusals():
+    """Each autoreset mode's flags; the step's parts and ``RolloutStep`` take both
+    same-step modes and refuse ``"next_step"``; an unknown mode is refused."""
+    from tether_gym_agents.accel.graphs import RolloutStep
+
+    flags = {mode: (env.same_step, env.sync_free) for mode in
+             ("next_step", "same_step", "same_step_sync_free")
+             for env in [TorchTetherVecEnv(2, autoreset_mode=mode)]}
+    assert flags == {"next_step": (False, False), "same_step": (True, False),
+                     "same_step_sync_free": (True, True)}
+    env = TorchTetherVecEnv(2)
+    env.reset()
+    with pytest.raises(RuntimeError, match="need autoreset_mode='same_step' or "
+                                           "'same_step_sync_free' \\(got 'next_step'\\)"):
+        env.step_begin()
+    with pytest.raises(ValueError, match="RolloutStep needs autoreset_mode='same_step' or "
+                                         "'same_step_sync_free', got 'next_step'"):
+        RolloutStep(None, env)
+    with pytest.raises(ValueError, match="autoreset_mode='sync_free' must be one of"):
+        TorchTetherVecEnv(2, autoreset_mode="sync_free")
 
 
 @pytest.mark.parametrize("backend", ["torch", "numba"])
