@@ -521,21 +521,29 @@ class TorchTetherVecEnv:
         :meth:`reset_kernel`, :meth:`reset_end` (``begin`` and ``end``: the same,
         captured as graphs), then one host sync.
         """
-        begin = self.reset_begin if begin is None else begin
-        end = self.reset_end if end is None else end
         if mask is not None:
             self._pending.copy_(mask)
-        failed = True
         for _ in range(MAX_RESET_DRAWS):
-            begin()
-            self.reset_kernel()
-            end()
+            self._reset_attempt(begin, end)
             if not bool(self._any_pending):
-                failed = False
                 break
-        if failed:
-            torch.where(self._pending, self._start_failure(), self._start_code,
-                        out=self._start_code)
+        else:
+            self._mark_failed_starts()
+
+    def _reset_attempt(self, begin: Callable[[], None] | None = None,
+                       end: Callable[[], None] | None = None) -> None:
+        """One reset attempt: :meth:`reset_begin`, :meth:`reset_kernel`, :meth:`reset_end`.
+
+        ``begin``, ``end``: the first and last captured as graphs (None: called).
+        """
+        (self.reset_begin if begin is None else begin)()
+        self.reset_kernel()
+        (self.reset_end if end is None else end)()
+
+    def _mark_failed_starts(self) -> None:
+        """The rows still pending start failed: their code, from their last start drawn."""
+        torch.where(self._pending, self._start_failure(), self._start_code,
+                    out=self._start_code)
 
     # A reset attempt's parts, as a step's: reset_begin and reset_end can be captured as
     # graphs (RolloutStep does), reset_kernel is a numba backend's launch.
@@ -586,8 +594,7 @@ class TorchTetherVecEnv:
         self._pending.copy_(still)
         torch.any(self._pending, out=self._any_pending)
         if self.sync_free:  # no second draw: a failed start starts failed (class docstring)
-            torch.where(self._pending, self._start_failure(), self._start_code,
-                        out=self._start_code)
+            self._mark_failed_starts()
 
     def _write_start(self, rows: torch.Tensor, s: dict[str, torch.Tensor]) -> None:
         """Copy the start ``s`` into the rows of the mask ``rows`` (in place)."""
@@ -696,9 +703,7 @@ class TorchTetherVecEnv:
         attempt, whether or not a row ended, and no host sync (the class docstring).
         """
         if self.sync_free:
-            (self.reset_begin if begin is None else begin)()
-            self.reset_kernel()
-            (self.reset_end if end is None else end)()
+            self._reset_attempt(begin, end)
         elif bool(self._any_ended):
             self._reset_rows(None, begin, end)
 
