@@ -20,7 +20,9 @@ timed iterations, so a later capture, of the reset's graphs, does not weigh):
    the env and the env's first part; ``kernel``: a numba backend's launch; ``end``: its
    results into the env; ``autoreset``: the host's question whether a sub-env ended and
    the resets; ``observe``: the learner's half), the advantages (``finish``) and the
-   updates (``update``: the minibatch orders and every minibatch step). A part's time is
+   updates (``update``: the minibatch orders and every minibatch step); where the whole
+   rollout is one graph (``--cuda-graphs --sync-free`` on the torch backend or on
+   numba-cuda), its replay (``rollout``: the step's parts are then 0). A part's time is
    then the device's time to run it plus what the host spends launching it. The syncs
    keep the host from running ahead of the device, so the parts add up to more than
    run 1's iteration: run 1 is the cost, run 2 says where it goes.
@@ -48,7 +50,7 @@ sys.path.insert(0, str(ROOT))
 
 FIRST_TIMED = 5
 """The first timed iteration (the pieces are captured at their 4th call)."""
-PARTS = ("act", "kernel", "end", "autoreset", "observe", "finish", "update")
+PARTS = ("act", "kernel", "end", "autoreset", "observe", "finish", "rollout", "update")
 
 
 def _run(config: Path, device: torch.device, iterations: int, parts: bool,
@@ -99,7 +101,8 @@ def _run(config: Path, device: torch.device, iterations: int, parts: bool,
     class TimedStep(RolloutStep):
         def __init__(self, rollout, env, graphs=False, capture=None):
             super().__init__(rollout, env, graphs, capture)
-            if parts:
+            # inside the whole rollout's graph (a sync would break its capture): untimed
+            if parts and not (options["cuda_graphs"] and env.whole_step_graph):
                 self._act = timed("act", self._act)
                 self._observe = timed("observe", self._observe)
                 if self._end is not None:
@@ -107,9 +110,10 @@ def _run(config: Path, device: torch.device, iterations: int, parts: bool,
                 env.step_kernel = timed("kernel", env.step_kernel)
                 env.step_autoreset = timed("autoreset", env.step_autoreset)
 
-    def graphed_call(fn, *args, **kwargs):  # the trainer's only one: the advantages
+    def graphed_call(fn, *args, **kwargs):  # the advantages, or the whole rollout
         call = real_graphed_call(fn, *args, **kwargs)
-        return timed("finish", call) if parts else call
+        name = "finish" if fn.__name__ == "finish" else "rollout"
+        return timed(name, call) if parts else call
 
     real = (trainer._update, trainer.GraphedCall, trainer.RolloutStep,
             trainer.evaluate_on_device)

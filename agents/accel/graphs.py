@@ -10,9 +10,14 @@ rollout step with the env's step (:class:`RolloutStep`: the policy's half
 step; on a numba backend the kernel's results into the state; the learner's half
 :meth:`~.rollout.Rollout.observe`; each reset attempt of the autoreset), the
 advantages (:meth:`~.rollout.Rollout.finish`) and the update, every minibatch step of
-an iteration in one graph (:class:`GraphedUpdate`). What stays eager: the numba backends' kernel
-launches (numba launches them, not torch) and the autoreset's host syncs (whether any
-sub-env ended, whether any start must be drawn again), which decide what runs next.
+an iteration in one graph (:class:`GraphedUpdate`). What stays eager: the CPU numba
+backend's kernel calls (host calls, not CUDA work) and the default autoreset's host syncs
+(whether any sub-env ended, whether any start must be drawn again), which decide what
+runs next. Without either (``--sync-free`` on the torch backend, or on numba-cuda, whose
+kernel is launched on torch's current stream: ``env.whole_step_graph``), nothing in a
+rollout needs the host, and the trainer captures the whole rollout, its ``n_steps``
+steps with their reset attempts and the advantages, as one graph: one launch per
+iteration for the rollout, one for the update.
 What a graph needs from a piece, they provide:
 
 * no host sync: the distributions skip their argument checks, and nothing reads a
@@ -305,6 +310,9 @@ class RolloutStep:
     step then costs the host 2 graph launches and a sync (torch backend), or 3
     launches, a kernel and a sync (numba), plus 1 or 2 launches, a kernel and a sync per
     reset attempt, against about 220 to 1,600 operations eager (bench/accel_ops.py).
+    Where one graph can hold a whole step (``env.whole_step_graph``), the trainer calls
+    the step ungraphed inside its graph of the whole rollout instead
+    (:func:`~.trainer._collector`).
 
     Parameters
     ----------

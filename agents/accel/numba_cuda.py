@@ -9,9 +9,12 @@ the GPU instead of by numba for the CPU: the equations have one source. The torc
 (:class:`~.row_step.NumbaCpuStep`) runs the same row code compiled by numba.
 
 The arrays are torch tensors on the GPU, handed to the kernel without a copy through
-``__cuda_array_interface__``; the kernel runs on the default stream, as torch's work
-does. Each call (:class:`~.row_step.RowStep`) copies the inputs into the batch's rows,
-launches one kernel over the rows and returns the rows as a :class:`~.chain.TaskStep`.
+``__cuda_array_interface__``. The kernel is launched on torch's current stream (the
+default stream, where torch's work runs, or the stream that ``torch.cuda.graph``
+captures on), so that a CUDA graph captured around it holds the launch too
+(``train.py gpu --cuda-graphs --sync-free``: the whole rollout as one graph). Each call
+(:class:`~.row_step.RowStep`) copies the inputs into the batch's rows, launches one
+kernel over the rows and returns the rows as a :class:`~.chain.TaskStep`.
 
 On a machine without a GPU the same kernel runs in numba-cuda's simulator
 (``NUMBA_ENABLE_CUDASIM=1`` before numba is imported, CPU tensors): the simulator runs
@@ -149,6 +152,8 @@ class NumbaCudaStep(RowStep):
                              *[self._view(t) for t in self.work[1:]])
         self._action = (self._view(self.action),)
         self._blocks = (self.num + THREADS_PER_BLOCK - 1) // THREADS_PER_BLOCK
+        self.on_torch_stream = device.type == "cuda"  # the simulator has no streams
+        self._streams: dict[int, Any] = {}
 
     def _view(self, t: torch.Tensor):
         """The kernel's view of a tensor: numba's device array, or numpy's in the simulator."""
@@ -156,6 +161,20 @@ class NumbaCudaStep(RowStep):
             return self._cuda.as_cuda_array(t)
         return t.numpy()
 
+    def stream(self):
+        """Torch's current CUDA stream as numba's (an external stream; 0 in the simulator).
+
+        Torch's stream is the default stream in eager code and the capture stream
+        inside ``torch.cuda.graph``: launched there, the kernel is ordered with torch's
+        work and recorded by a capture.
+        """
+        if not self.on_torch_stream:
+            return 0
+        ptr = int(torch.cuda.current_stream(self.device).cuda_stream)
+        if ptr not in self._streams:
+            self._streams[ptr] = self._cuda.external_stream(ptr)
+        return self._streams[ptr]
+
     def _launch(self, reset: bool) -> None:
-        _kernel()[self._blocks, THREADS_PER_BLOCK](self._action, self._rows, self._cfg,
-                                                    self._work, reset)
+        _kernel()[self._blocks, THREADS_PER_BLOCK, self.stream()](
+            self._action, self._rows, self._cfg, self._work, reset)

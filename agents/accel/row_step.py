@@ -62,6 +62,9 @@ class RowStep:
 
     rows: Any  # Rows of tensors (Rows declares numpy arrays)
     action: torch.Tensor
+    on_torch_stream: bool = False
+    """Whether :meth:`_launch` runs on torch's current CUDA stream, where a CUDA graph
+    capture records it (a CPU call is no CUDA work: False)."""
 
     def __init__(self, config: EnvConfig, num: int, device: torch.device):
         self.device = device

@@ -158,12 +158,10 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
             append_command(folder, command)
     raw, _ = env.reset()
     rollout.start(raw)
-    step = RolloutStep(rollout, env, graphs=run.cuda_graphs)  # the env's step included
-    finish: Callable[[], None] = rollout.finish
+    collect = _collector(rollout, env, T, run.cuda_graphs)
     minibatch_steps: Callable[..., None] = (CompiledSteps() if run.compile_update
                                             else _minibatch_steps)
-    if run.cuda_graphs:  # each captured after its warm-up calls, then replayed
-        finish = GraphedCall(finish)
+    if run.cuda_graphs:  # captured after its warm-up calls, then replayed
         minibatch_steps = GraphedUpdate(minibatch_steps)
     per_rollout = T * N
     n_updates = max(1, math.ceil(timesteps / per_rollout))
@@ -179,9 +177,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
         if settings.lr_schedule != "adaptive":
             lr.fill_(learning_rate_at(settings, progress))
         with torch.no_grad():
-            for _ in range(T):
-                step()
-            finish()
+            collect()
         steps += per_rollout
         _update(policy, opt, lr, settings, rollout.batch, minibatch_steps)
         out_of_time = time.perf_counter() - t0 > max_seconds
@@ -282,6 +278,32 @@ def deterministic_episodes(act, groups: int, env_kwargs, device, episodes: int,
             # None: no episode survived past orbit 1 (no figure, rather than a fake 0)
             "tracking_rms": [float(r) if n > 0 else None for r, n in zip(rms, steps,
                                                                        strict=True)]}
+
+
+def _collector(rollout: Rollout, env: TorchTetherVecEnv, T: int,
+               graphs: bool) -> Callable[[], None]:
+    """A rollout's ``T`` steps, the env's included, and its advantages, as one call.
+
+    With ``graphs``: where one graph can hold a whole step
+    (``env.whole_step_graph``: ``--sync-free`` on the torch backend or on numba-cuda),
+    the whole rollout is one :class:`~.graphs.GraphedCall` (one launch per iteration);
+    otherwise each step's pieces (:class:`~.graphs.RolloutStep`) and the advantages
+    are graphs of their own, and the host launches them step by step.
+    """
+    whole = graphs and env.whole_step_graph
+    step = RolloutStep(rollout, env, graphs=graphs and not whole)  # the env's step included
+    finish: Callable[[], None] = rollout.finish
+    if graphs and not whole:
+        finish = GraphedCall(finish)
+
+    def rollout_steps() -> None:
+        for _ in range(T):
+            step()
+        finish()
+
+    if whole:  # the env's draws and the actions' (torch's default generator) inside
+        return GraphedCall(rollout_steps, generators=(env.generator,))
+    return rollout_steps
 
 
 def _permutations(epochs: int, S: int, M: int, device) -> torch.Tensor:

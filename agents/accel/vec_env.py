@@ -193,7 +193,8 @@ class TorchTetherVecEnv:
     (:class:`StepOutputs`) and ``obs``. Every tensor of the env stays in the storage it
     was made in, updated in place, so that a learner can capture the parts without a
     host sync or a numba launch as CUDA graphs and replay them
-    (:class:`~.graphs.RolloutStep`); ``step`` itself returns copies.
+    (:class:`~.graphs.RolloutStep`); ``step`` itself returns copies. Where
+    :attr:`whole_step_graph` is True, one graph can hold a whole step.
 
     ## Starting state
 
@@ -376,6 +377,17 @@ class TorchTetherVecEnv:
             final_obs=torch.zeros_like(self.obs), final_failure=torch.zeros_like(self.failure))
 
     # ------------------------------------------------------------------ #
+    @property
+    def whole_step_graph(self) -> bool:
+        """Whether one CUDA graph can hold a whole step, its autoreset included.
+
+        True with ``"same_step_sync_free"`` (no host sync) on the torch backend (torch
+        operations only) or on numba-cuda on a GPU (its kernel launched on torch's
+        stream, where a capture records it); False on the CPU's numba backend, whose
+        kernel is a host call, and with the other modes.
+        """
+        return self.sync_free and (self._kernel is None or self._kernel.on_torch_stream)
+
     @property
     def observation_dim(self) -> int:
         """Length of one observation."""

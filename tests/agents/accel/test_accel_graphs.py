@@ -441,17 +441,23 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, b
 
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-def test_train_gpu_with_cuda_graphs_runs_on_a_gpu(tmp_path):
-    """On a GPU: ``train.py gpu --cuda-graphs`` trains four iterations (every piece
-    captured and replayed) and writes agents with finite weights. (Its samples are drawn
-    inside the graphs, so its weights are not the eager run's: the pieces' equality is
-    the device-parametrised tests' above.)"""
+@pytest.mark.parametrize("flags", [[], ["--sync-free"],
+                                   ["--sync-free", "--backend", "numba-cuda"]])
+def test_train_gpu_with_cuda_graphs_runs_on_a_gpu(tmp_path, flags):
+    """On a GPU: ``train.py gpu --cuda-graphs`` trains five iterations (every piece
+    captured and replayed) and writes agents with finite weights; with ``--sync-free``
+    the whole rollout is one graph, on numba-cuda its kernel launches included. (Its
+    samples are drawn inside the graphs, so its weights are not the eager run's: the
+    pieces' equality is the device-parametrised tests' above.)"""
     from tether_gym_agents.cli.train import main as train_main
     from tether_gym_agents.files.safe_format import load_agent
 
+    if "numba-cuda" in flags:
+        pytest.importorskip("numba_cuda")
     out = tmp_path / "graphs"
     assert train_main(["gpu", "--device", "cuda", "--out", str(out), "--n-envs", "16",
-                       "--seeds", "2", "--timesteps", str(16 * 64 * 5), "--cuda-graphs"]) == 0
+                       "--seeds", "2", "--timesteps", str(16 * 64 * 5), "--cuda-graphs",
+                       *flags]) == 0
     for k in (0, 1):
         state = load_agent(out / f"seed_{k}")[0].state_dict()
         assert all(torch.isfinite(w).all() for w in state.values())

@@ -42,3 +42,53 @@ def test_load_cuda_names_the_install_without_numba_cuda(monkeypatch):
     monkeypatch.setattr(numba_cuda, "simulated", lambda: False)
     with pytest.raises(ImportError, match=r'pip install "numba-cuda\[cu13\]"'):
         numba_cuda.load_cuda()
+
+
+def test_the_kernel_is_launched_on_torchs_current_stream(monkeypatch):
+    """On a GPU the kernel goes to torch's current stream (the default stream eagerly,
+    the capture stream inside ``torch.cuda.graph``), wrapped once per stream as numba's
+    external stream, so that a CUDA graph captured around it records the launch; in the
+    simulator (no streams) to stream 0. The wiring only, with stand-ins for CUDA: CI
+    has no GPU, and whether a capture records the launch is the device script's check."""
+    launches, wrapped = [], []
+
+    class Kernel:
+        def __getitem__(self, config):
+            def launch(*args):
+                launches.append((config, args[-1]))
+            return launch
+
+    class Cuda:
+        @staticmethod
+        def external_stream(ptr):
+            wrapped.append(ptr)
+            return f"numba stream {ptr}"
+
+    current = {"ptr": 0}
+
+    class Stream:
+        @property
+        def cuda_stream(self):
+            return current["ptr"]
+
+    monkeypatch.setattr(numba_cuda, "_kernel", Kernel)
+    monkeypatch.setattr(torch.cuda, "current_stream", lambda device=None: Stream())
+    step = object.__new__(numba_cuda.NumbaCudaStep)
+    step.device, step._cuda, step._streams = torch.device("cuda"), Cuda(), {}
+    step._blocks, step.on_torch_stream = 3, True
+    step._action = step._rows = step._cfg = step._work = None
+    step.launch()
+    current["ptr"] = 1234  # e.g. the stream torch.cuda.graph captures on
+    step.launch_reset()
+    step.launch()
+    current["ptr"] = 0
+    step.launch()
+    tpb = numba_cuda.THREADS_PER_BLOCK
+    assert launches == [((3, tpb, "numba stream 0"), False),
+                        ((3, tpb, "numba stream 1234"), True),
+                        ((3, tpb, "numba stream 1234"), False),
+                        ((3, tpb, "numba stream 0"), False)]
+    assert wrapped == [0, 1234]
+    step.on_torch_stream = False  # the simulator's
+    step.launch()
+    assert launches[-1] == ((3, tpb, 0), False)

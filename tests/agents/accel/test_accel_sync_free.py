@@ -145,11 +145,18 @@ def test_the_modes_flags_and_refusals():
     same-step modes and refuse ``"next_step"``; an unknown mode is refused."""
     from tether_gym_agents.accel.graphs import RolloutStep
 
-    flags = {mode: (env.same_step, env.sync_free) for mode in
-             ("next_step", "same_step", "same_step_sync_free")
-             for env in [TorchTetherVecEnv(2, autoreset_mode=mode)]}
-    assert flags == {"next_step": (False, False), "same_step": (True, False),
-                     "same_step_sync_free": (True, True)}
+    flags = {(mode, backend): (env.same_step, env.sync_free, env.whole_step_graph)
+             for mode in ("next_step", "same_step", "same_step_sync_free")
+             for backend in ("torch", "numba")
+             for env in [TorchTetherVecEnv(2, autoreset_mode=mode, backend=backend)]}
+    # one graph holds a whole step only without host syncs and without a host call (the
+    # CPU's numba kernel); numba-cuda's on a GPU: test_accel_numba_cuda
+    assert flags == {("next_step", "torch"): (False, False, False),
+                     ("next_step", "numba"): (False, False, False),
+                     ("same_step", "torch"): (True, False, False),
+                     ("same_step", "numba"): (True, False, False),
+                     ("same_step_sync_free", "torch"): (True, True, True),
+                     ("same_step_sync_free", "numba"): (True, True, False)}
     env = TorchTetherVecEnv(2)
     env.reset()
     with pytest.raises(RuntimeError, match="need autoreset_mode='same_step' or "
@@ -166,9 +173,13 @@ def test_the_modes_flags_and_refusals():
 def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monkeypatch,
                                                                   backend):
     """``train_seeds`` with ``sync_free`` and every graph of ``--cuda-graphs`` captured and
-    replayed through RecordingCapture on the CPU (the reset attempt's graphs replayed
-    every step): five iterations end with bitwise the eager sync-free run's weights and
-    episode counts; and the sync-free run is not the default run (other draws)."""
+    replayed through RecordingCapture on the CPU: five iterations end with bitwise the
+    eager sync-free run's weights and episode counts; and the sync-free run is not the
+    default run (other draws). The torch backend's whole rollout (8 steps with their
+    reset attempts, and the advantages) is one graph, so two are captured (with the
+    update's), and a replay runs none of the env's Python; the numba backend's kernel
+    is a host call, so its step's and reset attempt's pieces are graphs of their own
+    (5), with the advantages' and the update's."""
     from tether_gym_agents.accel import graphs
     from tether_gym_agents.accel.graphs import RecordingCapture
     from tether_gym_agents.accel.ppo import PPOSettings
@@ -179,6 +190,22 @@ def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monk
     monkeypatch.setattr(torch.optim, "Adam",
                         lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
     monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
+    captures = []
+    real_capture = RecordingCapture.capture
+
+    def counted_capture(self, fn, generators=()):
+        captures.append(fn)
+        return real_capture(self, fn, generators)
+
+    monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
+    begins = [0]
+    real_begin = TorchTetherVecEnv.step_begin
+
+    def counted_begin(self):
+        begins[0] += 1
+        return real_begin(self)
+
+    monkeypatch.setattr(TorchTetherVecEnv, "step_begin", counted_begin)
     settings = PPOSettings(n_envs=4, n_steps=8, batch_size=16, n_epochs=2,
                            net_arch=(16, 16))
     env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 0.02, "disturbance": 0.1,
@@ -189,7 +216,16 @@ def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monk
         run = GpuRun([0, 1], 5 * 8 * 4, env_kwargs, tmp_path / name, torch.device("cpu"),
                      checkpoints=5, eval_episodes=2, backend=backend, cuda_graphs=graphed,
                      sync_free=sync_free)
+        begins[0] = 0
         summary = train_seeds(settings, run, log=None)
+        if graphed and backend == "torch":
+            assert len(captures) == 2
+            assert begins[0] == 4 * 8  # 3 warm-up rollouts and the capture's, no replay's
+        elif graphed:
+            assert len(captures) == 7
+            assert begins[0] == 3 + 1  # the step's first graph: 3 warm-up steps, the capture
+        else:
+            assert begins[0] == 5 * 8
         out[name] = (summary, [load_agent(tmp_path / name / f"seed_{k}")[0].state_dict()
                                for k in (0, 1)])
     (eager, w_eager), (graphed, w_graphed) = out["eager"], out["graphed"]
