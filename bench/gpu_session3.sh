@@ -43,11 +43,18 @@
 #      --env numba-cuda, 10 seeds), an iteration of J with the three flags timed part by
 #      part, without and with --cuda-graphs, and with --sync-free too (the autoreset
 #      without host syncs, 2026-12-07), and one seed of J with all five for 40 s.
+#   8. (another call, if device time is left) the whole rollout as one graph
+#      (--cuda-graphs --sync-free, written 2026-12-07 without a device; the numba-cuda
+#      kernel now launched on torch's current stream so that CUDA's capture records it):
+#      the GPU tests of graphed training with each backend, an iteration of J timed
+#      with per-step graphs (the default autoreset) and as one graph, on each backend,
+#      and one seed of J for 40 s as one graph on numba-cuda.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
-# as two calls, each under the tool's 10 minutes even at every timeout:
+# as separate calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
 #   bash bench/gpu_session3.sh train       # steps 4-6 (at most 550 s; about 6 minutes)
 #   bash bench/gpu_session3.sh fused       # step 7 (at most 570 s; about 5 minutes)
+#   bash bench/gpu_session3.sh whole       # step 8 (at most 560 s; about 5 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -115,5 +122,22 @@ timeout 120 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-g
     --out runs_gpu/single_J_fused
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
 tar czf $OUT/runs3_fused.tar.gz runs_gpu/single_J_fused
+fi
+if [ "$PART" = whole ]; then
+echo "== 8. the whole rollout as one graph (--cuda-graphs --sync-free)"
+timeout 200 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
+    -k runs_on_a_gpu 2>&1 | grep -E "FAILED|passed|failed|skipped|^E .*Error"
+for backend in numba-cuda torch; do
+  for sync in "" --sync-free; do
+    timeout 60 python3 bench/accel_iteration.py --device cuda --backend $backend \
+        --cuda-graphs $sync --iterations 12 | tee -a $OUT/iteration3_whole.json
+  done
+done
+t=$(date +%s.%N)
+timeout 120 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-graphs \
+    --sync-free --backend numba-cuda --max-seconds 40 --device cuda \
+    --out runs_gpu/single_J_whole
+echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"
+tar czf $OUT/runs3_whole.tar.gz runs_gpu/single_J_whole
 fi
 } 2>&1 | tee $OUT/log3_$PART.txt

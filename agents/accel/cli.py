@@ -160,8 +160,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "the GPU); docs/gpu.md")
     p.add_argument("--cuda-graphs", action="store_true",
                    help="capture the learner's pieces (the rollout step's two halves, the "
-                        "advantages, the minibatch step) as CUDA graphs and replay them "
-                        "(CUDA devices only; not yet measured on a GPU: docs/gpu.md)")
+                        "advantages, the minibatch step) as CUDA graphs and replay them; "
+                        "with --sync-free on the torch or numba-cuda backend the whole "
+                        "rollout is one graph (CUDA devices only; not yet measured on a "
+                        "GPU: docs/gpu.md)")
     for flag, text in COMPILE_FLAGS.items():
         p.add_argument(flag, action="store_true", help=text)
     p.add_argument("--sync-free", action="store_true",
