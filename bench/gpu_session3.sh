@@ -46,7 +46,8 @@
 #   8. (another call, if device time is left) the whole rollout as one graph
 #      (--cuda-graphs --sync-free, written 2026-12-07 without a device; the numba-cuda
 #      kernel now launched on torch's current stream so that CUDA's capture records it):
-#      the GPU tests of graphed training with each backend, an iteration of J timed
+#      the GPU tests of graphed training with each backend, the env's throughput with
+#      16 sync-free steps per graph (bench/gpu_throughput.py --graphed), an iteration of J timed
 #      with per-step graphs (the default autoreset) and as one graph, on each backend,
 #      and one seed of J for 40 s as one graph on numba-cuda.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
@@ -125,11 +126,14 @@ tar czf $OUT/runs3_fused.tar.gz runs_gpu/single_J_fused
 fi
 if [ "$PART" = whole ]; then
 echo "== 8. the whole rollout as one graph (--cuda-graphs --sync-free)"
-timeout 200 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
+timeout 150 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
     -k runs_on_a_gpu 2>&1 | grep -E "FAILED|passed|failed|skipped|^E .*Error"
+# the env alone: 16 sync-free steps per graph at the batch sizes
+timeout 90 python3 bench/gpu_throughput.py --device cuda --envs 65536 1048576 --steps 64 \
+    --backend torch numba-cuda --graphed 16 --out $OUT/bench3_graphed.json
 for backend in numba-cuda torch; do
   for sync in "" --sync-free; do
-    timeout 60 python3 bench/accel_iteration.py --device cuda --backend $backend \
+    timeout 50 python3 bench/accel_iteration.py --device cuda --backend $backend \
         --cuda-graphs $sync --iterations 12 | tee -a $OUT/iteration3_whole.json
   done
 done

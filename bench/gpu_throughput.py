@@ -4,6 +4,7 @@
     python bench/gpu_throughput.py --device cuda --envs 65536 1048576 --backend torch numba-cuda
     python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba      # the CPU ratio
     python bench/gpu_throughput.py --device cpu --envs 256 4096 --numba --backend torch numba
+    python bench/gpu_throughput.py --device cuda --envs 65536 --backend numba-cuda --graphed 16
 
 For each batch size: env steps per second of ``TorchTetherVecEnv.step`` (N = 3,
 float64, the ppo training distribution's env kwargs, zero actions, autoreset on), after
@@ -11,6 +12,12 @@ warm-up steps, timed over whole steps with the device synchronised. ``--numba`` 
 the native vector env (``gym.make_vec``, one thread) at the same sizes in the same run;
 ``--backend torch numba numba-cuda`` times those backends of the env (``reset_s``: construction
 and first reset, which includes numba-cuda's compile of the step kernel on a cold cache).
+``--graphed K`` also times each backend's step as a learner on the device runs it: the
+sync-free autoreset (``"same_step_sync_free"``), the step's parts without ``step``'s
+copies, ``K`` steps captured as one CUDA graph and replayed (the step's own draws
+inside it), where the backend allows one graph (``whole_step_graph``: the torch port,
+numba-cuda; not the CPU's numba backend). On the CPU the graph is
+``RecordingCapture``'s stand-in, a check of the wiring, not a speed.
 Prints one line per measurement and writes them as JSON. (Whether numba-cuda compiles
 the numba env's step at all, with its registers and spills, is ``bench/numba_cuda_ptx.py``,
 which needs no GPU.)
@@ -61,6 +68,69 @@ def torch_rate(num, device, steps, warmup=3, mode="same_step", backend="torch"):
     dt = (time.perf_counter() - t) / steps
     return {"what": f"TorchTetherVecEnv backend={backend}", "device": str(env.device),
             "envs": num, "reset_s": start, "ms_per_step": dt * 1e3, "env_steps_per_s": num / dt}
+
+
+def graphed_env(num, device, backend="torch", per_graph=16):
+    """A reset sync-free env on zero actions and ``per_graph`` of its steps as a graph.
+
+    Returns ``(env, graph)``, ``graph`` a :class:`~tether_gym_agents.accel.graphs.GraphedCall`
+    of the steps' parts (CUDA's capture on a CUDA device, ``RecordingCapture`` else), or
+    ``None`` where one graph cannot hold a step (``whole_step_graph`` False).
+    """
+    from tether_gym_agents.accel.graphs import CudaCapture, GraphedCall, RecordingCapture
+    from tether_gym_agents.accel.vec_env import TorchTetherVecEnv
+
+    env = TorchTetherVecEnv(num, device=device, seed=0, autoreset_mode="same_step_sync_free",
+                            check_actions=False, backend=backend, full_info=False,
+                            **ENV_KWARGS)
+    if not env.whole_step_graph:
+        return None
+    env.reset()
+    env.action_in.zero_()
+
+    def steps_in_graph() -> None:
+        for _ in range(per_graph):
+            env.step_begin()
+            env.step_kernel()
+            env.step_end()
+            env.step_autoreset()
+
+    capture = CudaCapture() if env.device.type == "cuda" else RecordingCapture()
+    return env, GraphedCall(steps_in_graph, capture, (env.generator,))
+
+
+def graphed_rate(num, device, steps, backend="torch", per_graph=16):
+    """Env steps per second of ``per_graph`` sync-free steps replayed as one CUDA graph.
+
+    The step's parts (``step_begin``, ``step_kernel``, ``step_end``, ``step_autoreset``)
+    on zero actions, as :class:`~tether_gym_agents.accel.graphs.RolloutStep` calls them;
+    ``ceil(steps / per_graph)`` replays timed after the graph's warm-up calls and
+    capture. ``None`` where one graph cannot hold the step (``whole_step_graph``).
+    """
+    from tether_gym_agents.accel.graphs import WARMUP_STEPS
+
+    t = time.perf_counter()
+    made = graphed_env(num, device, backend, per_graph)
+    if made is None:
+        return None
+    env, graph = made
+    _sync(env.device)
+    start = time.perf_counter() - t
+    t = time.perf_counter()
+    for _ in range(WARMUP_STEPS + 1):  # the warm-up calls, then the capture and a replay
+        graph()
+    _sync(env.device)
+    capture_s = time.perf_counter() - t
+    replays = -(-steps // per_graph)
+    t = time.perf_counter()
+    for _ in range(replays):
+        graph()
+    _sync(env.device)
+    dt = (time.perf_counter() - t) / (replays * per_graph)
+    return {"what": f"TorchTetherVecEnv backend={backend}, sync-free, {per_graph} steps "
+                    f"per CUDA graph", "device": str(env.device), "envs": num,
+            "reset_s": start, "warmup_and_capture_s": capture_s, "graph_steps": per_graph,
+            "ms_per_step": dt * 1e3, "env_steps_per_s": num / dt}
 
 
 def compiled_rate(num, device, steps):
@@ -137,8 +207,13 @@ def main(argv=None) -> int:
                         "CUDA devices only)")
     p.add_argument("--numba", action="store_true")
     p.add_argument("--compile", action="store_true", help="also time the torch.compile'd core")
+    p.add_argument("--graphed", type=int, default=0, metavar="K",
+                   help="also time each backend's sync-free step, K steps per CUDA graph "
+                        "(the module docstring)")
     p.add_argument("--out", default=None)
     args = p.parse_args(argv)
+    if args.graphed < 0:
+        p.error(f"--graphed must be >= 1 steps per graph (0: off), got {args.graphed}")
     import torch
 
     torch.set_num_threads(int(os.environ.get("OMP_NUM_THREADS", "1")))
@@ -155,6 +230,14 @@ def main(argv=None) -> int:
             row = torch_rate(num, device, args.steps, backend=backend)
             rows.append(row)
             print(json.dumps(row), flush=True)
+            if args.graphed:
+                graphed = graphed_rate(num, device, args.steps, backend, args.graphed)
+                if graphed is None:
+                    print(json.dumps({"what": f"backend={backend}: no whole-step graph "
+                                              f"(its kernel is a host call)", "envs": num}))
+                    continue
+                rows.append(graphed)
+                print(json.dumps(graphed), flush=True)
         if args.numba:
             row = numba_rate(num, args.steps)
             rows.append(row)
