@@ -48,14 +48,15 @@
 #      kernel now launched on torch's current stream so that CUDA's capture records it):
 #      the GPU tests of graphed training with each backend, the env's throughput with
 #      16 sync-free steps per graph (bench/gpu_throughput.py --graphed), an iteration of J timed
-#      with per-step graphs (the default autoreset) and as one graph, on each backend,
+#      with per-step graphs (the default autoreset) and as one graph on numba-cuda, as one
+#      graph on the torch port, eager and fused (its resets compiled since 2026-12-07),
 #      and one seed of J for 40 s as one graph on numba-cuda.
 # Run through the device tool with carry [".whl"] (bench/gpu_setup.sh says how to fill it),
 # as separate calls, each under the tool's 10 minutes even at every timeout:
 #   bash bench/gpu_session3.sh check       # steps 1-3 (at most 500 s; about 4 minutes)
 #   bash bench/gpu_session3.sh train       # steps 4-6 (at most 550 s; about 6 minutes)
 #   bash bench/gpu_session3.sh fused       # step 7 (at most 570 s; about 5 minutes)
-#   bash bench/gpu_session3.sh whole       # step 8 (at most 560 s; about 5 minutes)
+#   bash bench/gpu_session3.sh whole       # step 8 (at most 570 s; about 5 minutes)
 . bench/gpu_setup.sh
 PART=${1:-check}
 {
@@ -126,19 +127,23 @@ tar czf $OUT/runs3_fused.tar.gz runs_gpu/single_J_fused
 fi
 if [ "$PART" = whole ]; then
 echo "== 8. the whole rollout as one graph (--cuda-graphs --sync-free)"
-timeout 150 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
+timeout 120 python3 -m pytest -q -p no:cacheprovider tests/agents/accel/test_accel_graphs.py \
     -k runs_on_a_gpu 2>&1 | grep -E "FAILED|passed|failed|skipped|^E .*Error"
 # the env alone: 16 sync-free steps per graph at the issue's batch sizes
 timeout 90 python3 bench/gpu_throughput.py --device cuda --envs 65536 1048576 --steps 64 \
     --backend torch numba-cuda --graphed 16 --out $OUT/bench3_graphed.json
-for backend in numba-cuda torch; do
-  for sync in "" --sync-free; do
-    timeout 50 python3 bench/accel_iteration.py --device cuda --backend $backend \
-        --cuda-graphs $sync --iterations 12 | tee -a $OUT/iteration3_whole.json
-  done
+# an iteration of J: numba-cuda with per-step graphs, then as one graph; the torch port
+# as one graph, eager and with the three compile flags (its resets fused since 2026-12-07)
+for flags in "--backend numba-cuda" "--backend numba-cuda --sync-free" \
+    "--backend torch --sync-free"; do
+  timeout 50 python3 bench/accel_iteration.py --device cuda --cuda-graphs $flags \
+      --iterations 12 | tee -a $OUT/iteration3_whole.json
 done
+timeout 110 python3 bench/accel_iteration.py --device cuda --cuda-graphs --backend torch \
+    --sync-free --compile --compile-update --compile-rollout --iterations 12 \
+    | tee -a $OUT/iteration3_whole.json
 t=$(date +%s.%N)
-timeout 120 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-graphs \
+timeout 100 python3 train.py gpu --config configs/gpu_ppo.yml --seeds 1 --cuda-graphs \
     --sync-free --backend numba-cuda --max-seconds 40 --device cuda \
     --out runs_gpu/single_J_whole
 echo "whole command $(python3 -c "print(round($(date +%s.%N) - $t, 1))") s"

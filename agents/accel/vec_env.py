@@ -225,8 +225,11 @@ class TorchTetherVecEnv:
     (torch.float64 or torch.float32), ``seed`` (int or None), ``autoreset_mode``,
     ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
     False: a NaN action turns its row's state non-finite, which terminates it as
-    ``"nonfinite"``), ``compile`` (True: the torch backend's step arithmetic,
-    :func:`~.chain.control_step`, runs through ``torch.compile``, fused into few kernels;
+    ``"nonfinite"``), ``compile`` (True: the torch backend's arithmetic runs through
+    ``torch.compile``, fused into few kernels: the step (:func:`~.chain.control_step`
+    with the step's disturbance and noise and its results into the rows), the step's
+    outputs, and a reset attempt (the starts, their evaluation and their writes), to
+    float64 rounding of the eager arithmetic (Inductor reorders it);
     with a numba backend, the torch arithmetic around its kernel does: the step's
     disturbance and noise and the starts made of their draws, the inputs' copies, the
     results into the rows and the step's outputs, the starts' writes, bitwise what it
@@ -291,11 +294,7 @@ class TorchTetherVecEnv:
             from .numba_cuda import NumbaCudaStep
 
             self._kernel = NumbaCudaStep(self.config, self.num_envs, self.device)
-        if self._kernel is not None:
-            self._control_step = self._kernel
-        else:
-            self._control_step = (torch.compile(control_step, dynamic=False) if compile
-                                  else control_step)
+        self._control_step = control_step if self._kernel is None else self._kernel
         # a numba backend's torch arithmetic around its kernel: the step's inputs (its
         # rows, its disturbance and noise from the draws, the copies into the kernel's
         # rows), the results into the rows and the step's outputs, the starts and their
@@ -304,12 +303,23 @@ class TorchTetherVecEnv:
         self._kernel_step_end: Callable[[], None] = self._step_end_rows
         self._start_loaded: Callable[..., dict[str, torch.Tensor]] = self._load_starts
         self._kernel_reset_end: Callable[[], None] = self._reset_end_rows
+        # the torch backend's step of the live rows, its outputs, and its reset attempt
+        # (the starts, their evaluation and their writes); with compile, each through
+        # torch.compile (the draws stay eager)
+        self._torch_advance: Callable[..., None] = self._advance_rows
+        self._step_outputs: Callable[[], None] = self._same_step_outputs
+        self._torch_attempt: Callable[..., dict[str, torch.Tensor]] = self._attempt_rows
         if compile and self._kernel is not None:
             pieces: tuple[Any, ...] = (self._load_rows, self._step_end_rows,
                                        self._load_starts, self._reset_end_rows)
             (self._load_step, self._kernel_step_end, self._start_loaded,
              self._kernel_reset_end) = (torch.compile(f, fullgraph=True, dynamic=False)
                                         for f in pieces)
+        elif compile:
+            torch_pieces: tuple[Any, ...] = (self._advance_rows, self._same_step_outputs,
+                                             self._attempt_rows)
+            (self._torch_advance, self._step_outputs, self._torch_attempt) = (
+                torch.compile(f, fullgraph=True, dynamic=False) for f in torch_pieces)
         self._plan = StartPlan.of(self.config)
         # Python floats for the compiled pieces, which guard on numpy scalars by reading
         # them (a host read per call): the step's disturbance bound and observation noise
@@ -565,12 +575,22 @@ class TorchTetherVecEnv:
         With the torch backend, evaluate it and write it into the rows still pending
         (``reset_end``'s work); with a numba backend, copy it into the kernel's rows.
         """
-        draws = self._unit_draws(self.num_envs)  # scaled in _load_starts with a numba backend
+        draws = self._unit_draws(self.num_envs)  # scaled in the (compiled) pieces below
         if self._kernel is None:
-            self._attempt = self._start_inputs(self._scale_draws(draws))
-            self._write_attempt(self._evaluate(self._attempt))
+            self._attempt = self._torch_attempt(draws)
         else:
             self._attempt = self._start_loaded(draws)
+
+    def _attempt_rows(self, draws: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
+        """The torch backend's reset attempt of ``draws`` (:meth:`_unit_draws`): its starts.
+
+        The draws scaled (:meth:`_scale_draws`), the starts (:meth:`_start_inputs`)
+        evaluated (:meth:`_evaluate`) and written into the pending rows
+        (:meth:`_write_attempt`).
+        """
+        attempt = self._start_inputs(self._scale_draws(draws))
+        self._write_attempt(self._evaluate(attempt), attempt)
+        return attempt
 
     def _load_starts(self, draws: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
         """The starts of ``draws`` (:meth:`_unit_draws`), copied into a numba backend's rows.
@@ -595,9 +615,14 @@ class TorchTetherVecEnv:
         """A numba backend's evaluated starts into the pending rows (:meth:`reset_end`)."""
         self._write_attempt(self._kernel.reset_result())
 
-    def _write_attempt(self, out: dict[str, torch.Tensor]) -> None:
-        """The attempt's start into the pending rows; the rows whose start is good leave."""
-        s = self._start_result(self._attempt, out)
+    def _write_attempt(self, out: dict[str, torch.Tensor],
+                       attempt: dict[str, torch.Tensor] | None = None) -> None:
+        """The attempt's start into the pending rows; the rows whose start is good leave.
+
+        ``attempt``: the attempt's starts (:meth:`_start_inputs`; None: ``_attempt``),
+        ``out`` their evaluation.
+        """
+        s = self._start_result(self._attempt if attempt is None else attempt, out)
         self._write_start(self._pending, s)  # a row whose every draw fails keeps its last
         still = self._pending & ~s["ok"]
         # the attempt's rows start failed while their start is: after the last attempt, a
@@ -688,7 +713,7 @@ class TorchTetherVecEnv:
                                f"a reset() first")
         self._advance_begin(self.action_in, None, draw=True)  # the rows that did not end
         if self._kernel is None:
-            self._same_step_outputs()
+            self._step_outputs()
 
     def step_kernel(self) -> None:
         """Second part: the numba backends' kernel launch (nothing with the torch backend)."""
@@ -763,12 +788,22 @@ class TorchTetherVecEnv:
             gauss = torch.randn(self.noise.shape, generator=g, dtype=self.dtype,
                                 device=self.device)
         if self._kernel is None:
-            rows = self._live_rows(rows)
-            self._step_draws(rows, unit, gauss)
-            self._advance_end(self._control_step(self.nu, self.y, self.u, a, self.disturbance,
-                                                 self.noise, self.par), rows)
+            self._torch_advance(a, rows, unit, gauss)
         else:
             self._load_step(a, rows, unit, gauss)
+
+    def _advance_rows(self, a: torch.Tensor, rows: torch.Tensor | None,
+                      unit: torch.Tensor | None, gauss: torch.Tensor | None) -> None:
+        """The torch backend's step (:meth:`_advance_begin`) after its draws.
+
+        The live rows (:meth:`_live_rows`), their disturbance and noise
+        (:meth:`_step_draws`), :func:`~.chain.control_step` and its results into them
+        (:meth:`_advance_end`).
+        """
+        rows = self._live_rows(rows)
+        self._step_draws(rows, unit, gauss)
+        self._advance_end(self._control_step(self.nu, self.y, self.u, a, self.disturbance,
+                                             self.noise, self.par), rows)
 
     def _live_rows(self, rows: torch.Tensor | None) -> torch.Tensor:
         """``rows``, or with None the rows that did not end, written into ``_rows``."""

@@ -243,18 +243,38 @@ def test_bad_input_is_refused():
 
 
 @pytest.mark.slow
-def test_compiled_step_equals_the_eager_step():
-    """``compile=True`` fuses the step (torch.compile): same trajectory to 1e-12."""
-    kwargs = {**TRAINING, "disturbance": 0.1, "obs_noise": 1e-3}
-    envs = [TorchTetherVecEnv(16, device="cpu", seed=4, compile=c, **kwargs)
-            for c in (False, True)]
+@pytest.mark.parametrize("mode", ["next_step", "same_step", "same_step_sync_free"])
+def test_compiled_step_equals_the_eager_step(mode):
+    """``compile=True`` fuses the torch backend's step, its outputs and its reset
+    attempts (torch.compile): over 40 steps of 6-step episodes with disturbance and
+    noise (rows ending and reset in about every step, out of step with each other),
+    the same trajectory to 1e-12, the same flags, and the same draws (the generator);
+    and the pieces ran compiled."""
+    from torch._dynamo.utils import counters
+
+    torch._dynamo.reset()
+    before = counters["stats"]["unique_graphs"]
+    kwargs = {**TRAINING, "disturbance": 0.1, "obs_noise": 1e-3, "orbits_per_episode": 0.02}
+    envs = [TorchTetherVecEnv(16, device="cpu", seed=4, compile=c, autoreset_mode=mode,
+                              **kwargs) for c in (False, True)]
     for env in envs:
         env.reset()
-    action = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (30, 16, 2)))
+        env.nu[::2] += env._plan.episode_length / 2  # half the rows half an episode ahead
+    action = torch.as_tensor(np.random.default_rng(0).uniform(-1, 1, (40, 16, 2)))
+    ended = 0
     for a in action:
-        (o0, r0, t0, u0, _), (o1, r1, t1, u1, _) = (env.step(a) for env in envs)
-        np.testing.assert_allclose(envs[1].y.numpy(), envs[0].y.numpy(), rtol=1e-12,
-                                   atol=1e-15)
+        (o0, r0, t0, u0, i0), (o1, r1, t1, u1, i1) = (env.step(a) for env in envs)
+        for name in ("nu", "y", "u", "tension", "derivative", "par", "noise"):
+            np.testing.assert_allclose(getattr(envs[1], name).numpy(),
+                                       getattr(envs[0], name).numpy(), rtol=1e-12,
+                                       atol=1e-15, err_msg=name)
         np.testing.assert_allclose(r1.numpy(), r0.numpy(), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(o1.numpy(), o0.numpy(), rtol=2.0**-23, atol=1e-7)
         assert torch.equal(t0, t1) and torch.equal(u0, u1)
+        assert torch.equal(i0["failure"], i1["failure"])
+        assert torch.equal(envs[0].steps, envs[1].steps)
+        ended += int((t0 | u0).sum())
+    assert torch.equal(envs[0].generator.get_state(), envs[1].generator.get_state())
+    assert ended >= 40
+    # the step, the reset attempt, and with a same-step mode the step's outputs
+    assert counters["stats"]["unique_graphs"] - before >= (2 if mode == "next_step" else 3)
