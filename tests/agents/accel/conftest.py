@@ -67,3 +67,31 @@ def equality_tests_pass():
         assert " passed" in tail and "skipped" not in tail and "deselected" in tail, tail
 
     return run
+
+
+@pytest.fixture
+def recorded_graphs(monkeypatch):
+    """``train.py gpu --cuda-graphs`` on the CPU: its graphs kept by ``RecordingCapture``.
+
+    The trainer's ``CudaCapture`` becomes ``RecordingCapture``, and Adam the CPU's fused
+    one (which keeps its step count on the device, as CUDA's capturable Adam does).
+    Returns the list of the functions captured, in order.
+    """
+    import torch
+
+    from tether_gym_agents.accel import graphs
+    from tether_gym_agents.accel.graphs import RecordingCapture
+
+    real_adam = torch.optim.Adam
+    monkeypatch.setattr(torch.optim, "Adam",
+                        lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
+    monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
+    captures = []
+    real_capture = RecordingCapture.capture
+
+    def counted_capture(self, fn, generators=()):
+        captures.append(fn)
+        return real_capture(self, fn, generators)
+
+    monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
+    return captures

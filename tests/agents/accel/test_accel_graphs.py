@@ -385,7 +385,7 @@ def test_the_cpus_default_adam_cannot_be_captured():
 
 
 @pytest.mark.parametrize("backend", ["numba", "torch"])
-def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, backend):
+def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, recorded_graphs, backend):
     """``train_seeds`` with every graph of ``--cuda-graphs`` (the rollout step, the env's
     step included: one graph before the env's kernel, with the numba backend one after
     it, one after the autoreset; the reset attempts; the advantages; the update),
@@ -394,22 +394,10 @@ def test_a_graphed_run_trains_what_the_eager_run_trains(tmp_path, monkeypatch, b
     with bitwise the eager run's weights, statistics and episode counts. Both runs use
     the CPU's fused Adam, which keeps its step count on the device as CUDA's capturable
     Adam does."""
-    from tether_gym_agents.accel import graphs
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
     from tether_gym_agents.files.safe_format import load_agent
 
-    real_adam = torch.optim.Adam
-    monkeypatch.setattr(torch.optim, "Adam",
-                        lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
-    monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
-    captures = []
-    real_capture = RecordingCapture.capture
-
-    def counted_capture(self, fn, generators=()):
-        captures.append(fn)
-        return real_capture(self, fn, generators)
-
-    monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
+    captures = recorded_graphs
     settings = PPOSettings(n_envs=4, n_steps=8, batch_size=16, n_epochs=2,
                            net_arch=(16, 16))
     summaries, weights = [], []

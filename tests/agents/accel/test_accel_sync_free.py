@@ -171,6 +171,7 @@ def test_the_modes_flags_and_refusals():
 
 @pytest.mark.parametrize("backend", ["torch", "numba"])
 def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monkeypatch,
+                                                                  recorded_graphs,
                                                                   backend):
     """``train_seeds`` with ``sync_free`` and every graph of ``--cuda-graphs`` captured and
     replayed through RecordingCapture on the CPU: five iterations end with bitwise the
@@ -180,24 +181,11 @@ def test_a_graphed_sync_free_run_trains_what_the_eager_one_trains(tmp_path, monk
     update's), and a replay runs none of the env's Python; the numba backend's kernel
     is a host call, so its step's and reset attempt's pieces are graphs of their own
     (5), with the advantages' and the update's."""
-    from tether_gym_agents.accel import graphs
-    from tether_gym_agents.accel.graphs import RecordingCapture
     from tether_gym_agents.accel.ppo import PPOSettings
     from tether_gym_agents.accel.trainer import GpuRun, train_seeds
     from tether_gym_agents.files.safe_format import load_agent
 
-    real_adam = torch.optim.Adam
-    monkeypatch.setattr(torch.optim, "Adam",
-                        lambda params, **kw: real_adam(params, **{**kw, "fused": True}))
-    monkeypatch.setattr(graphs, "CudaCapture", RecordingCapture)
-    captures = []
-    real_capture = RecordingCapture.capture
-
-    def counted_capture(self, fn, generators=()):
-        captures.append(fn)
-        return real_capture(self, fn, generators)
-
-    monkeypatch.setattr(RecordingCapture, "capture", counted_capture)
+    captures = recorded_graphs
     begins = [0]
     real_begin = TorchTetherVecEnv.step_begin
 
