@@ -90,10 +90,7 @@ def graphed_env(num, device, backend="torch", per_graph=16):
 
     def steps_in_graph() -> None:
         for _ in range(per_graph):
-            env.step_begin()
-            env.step_kernel()
-            env.step_end()
-            env.step_autoreset()
+            env.step_in_place()
 
     capture = CudaCapture() if env.device.type == "cuda" else RecordingCapture()
     return env, GraphedCall(steps_in_graph, capture, (env.generator,))
@@ -102,8 +99,8 @@ def graphed_env(num, device, backend="torch", per_graph=16):
 def graphed_rate(num, device, steps, backend="torch", per_graph=16):
     """Env steps per second of ``per_graph`` sync-free steps replayed as one CUDA graph.
 
-    The step's parts (``step_begin``, ``step_kernel``, ``step_end``, ``step_autoreset``)
-    on zero actions, as :class:`~tether_gym_agents.accel.graphs.RolloutStep` calls them;
+    The step's parts (``env.step_in_place``) on zero actions, as
+    :class:`~tether_gym_agents.accel.graphs.RolloutStep` calls them;
     ``ceil(steps / per_graph)`` replays timed after the graph's warm-up calls and
     capture. ``None`` where one graph cannot hold the step (``whole_step_graph``).
     """

@@ -184,7 +184,8 @@ class TorchTetherVecEnv:
 
     ## The step's parts (for CUDA graphs)
 
-    With a same-step mode, ``step`` is :meth:`step_begin` (the draws; the torch
+    With a same-step mode, ``step`` is :meth:`step_in_place` and copies of its outputs;
+    :meth:`step_in_place` is :meth:`step_begin` (the draws; the torch
     backend's whole step), :meth:`step_kernel` (a numba backend's launch),
     :meth:`step_end` (its results into the state) and :meth:`step_autoreset` (a host
     sync, then reset attempts of :meth:`reset_begin`, :meth:`reset_kernel`,
@@ -308,7 +309,7 @@ class TorchTetherVecEnv:
         # torch.compile (the draws stay eager)
         self._torch_advance: Callable[..., None] = self._advance_rows
         self._step_outputs: Callable[[], None] = self._same_step_outputs
-        self._torch_attempt: Callable[..., dict[str, torch.Tensor]] = self._attempt_rows
+        self._torch_attempt: Callable[..., None] = self._attempt_rows
         if compile and self._kernel is not None:
             pieces: tuple[Any, ...] = (self._load_rows, self._step_end_rows,
                                        self._load_starts, self._reset_end_rows)
@@ -378,7 +379,7 @@ class TorchTetherVecEnv:
         # that the host's branch costs it a read and no launch
         self._any_ended = torch.zeros((), dtype=torch.bool, device=self.device)
         self._any_pending = torch.zeros((), dtype=torch.bool, device=self.device)
-        self._attempt: dict[str, torch.Tensor] = {}  # a reset attempt's starts
+        self._attempt: dict[str, torch.Tensor] = {}  # a numba reset attempt's starts, for reset_end
         self.outputs = StepOutputs(
             reward=z(num), cost=z(num, len(COST_NAMES)),
             terminated=torch.zeros(num, dtype=torch.bool, device=self.device),
@@ -577,20 +578,19 @@ class TorchTetherVecEnv:
         """
         draws = self._unit_draws(self.num_envs)  # scaled in the (compiled) pieces below
         if self._kernel is None:
-            self._attempt = self._torch_attempt(draws)
+            self._torch_attempt(draws)
         else:
             self._attempt = self._start_loaded(draws)
 
-    def _attempt_rows(self, draws: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
-        """The torch backend's reset attempt of ``draws`` (:meth:`_unit_draws`): its starts.
+    def _attempt_rows(self, draws: dict[str, torch.Tensor | None]) -> None:
+        """The torch backend's reset attempt of ``draws`` (:meth:`_unit_draws`).
 
         The draws scaled (:meth:`_scale_draws`), the starts (:meth:`_start_inputs`)
         evaluated (:meth:`_evaluate`) and written into the pending rows
         (:meth:`_write_attempt`).
         """
         attempt = self._start_inputs(self._scale_draws(draws))
-        self._write_attempt(self._evaluate(attempt), attempt)
-        return attempt
+        self._write_attempt(attempt, self._evaluate(attempt))
 
     def _load_starts(self, draws: dict[str, torch.Tensor | None]) -> dict[str, torch.Tensor]:
         """The starts of ``draws`` (:meth:`_unit_draws`), copied into a numba backend's rows.
@@ -613,16 +613,15 @@ class TorchTetherVecEnv:
 
     def _reset_end_rows(self) -> None:
         """A numba backend's evaluated starts into the pending rows (:meth:`reset_end`)."""
-        self._write_attempt(self._kernel.reset_result())
+        self._write_attempt(self._attempt, self._kernel.reset_result())
 
-    def _write_attempt(self, out: dict[str, torch.Tensor],
-                       attempt: dict[str, torch.Tensor] | None = None) -> None:
+    def _write_attempt(self, attempt: dict[str, torch.Tensor],
+                       out: dict[str, torch.Tensor]) -> None:
         """The attempt's start into the pending rows; the rows whose start is good leave.
 
-        ``attempt``: the attempt's starts (:meth:`_start_inputs`; None: ``_attempt``),
-        ``out`` their evaluation.
+        ``attempt``: the attempt's starts (:meth:`_start_inputs`), ``out`` their evaluation.
         """
-        s = self._start_result(self._attempt if attempt is None else attempt, out)
+        s = self._start_result(attempt, out)
         self._write_start(self._pending, s)  # a row whose every draw fails keeps its last
         still = self._pending & ~s["ok"]
         # the attempt's rows start failed while their start is: after the last attempt, a
@@ -674,10 +673,7 @@ class TorchTetherVecEnv:
                 raise ValueError(f"actions must be finite (no NaN or inf); rows {rows} are not")
         self.action_in.copy_(a)  # in the state's dtype
         if self.same_step:
-            self.step_begin()
-            self.step_kernel()
-            self.step_end()
-            self.step_autoreset()
+            self.step_in_place()
             o = self.outputs
             info = self.info() if self.full_info else {}
             info["final_obs"] = o.final_obs.clone()
@@ -700,6 +696,17 @@ class TorchTetherVecEnv:
     # Every part reads and writes only this env's tensors, which stay in the same storage
     # from its construction on (updated in place), and only step_kernel (a numba launch)
     # and step_autoreset (a host branch) cannot be captured.
+    def step_in_place(self) -> None:
+        """A same-step step of ``action_in``, its parts in turn, without ``step``'s copies.
+
+        :meth:`step_begin`, :meth:`step_kernel`, :meth:`step_end`, :meth:`step_autoreset`:
+        the outputs are left in :attr:`outputs` and ``obs``. No check of the actions.
+        """
+        self.step_begin()
+        self.step_kernel()
+        self.step_end()
+        self.step_autoreset()
+
     def step_begin(self) -> None:
         """First part: draw the step's disturbance and noise, and step ``action_in``.
 
@@ -776,8 +783,9 @@ class TorchTetherVecEnv:
 
         ``rows`` None: the rows that did not end (``~_autoreset``, into ``_rows``), the
         same-step autoreset's step. The uniform and normal draws are made here, eagerly;
-        what is made of them (:meth:`_step_draws`) runs with the numba backends' copies
-        into their rows, through torch.compile with ``compile``.
+        what is made of them (:meth:`_step_draws`) runs with the torch backend's step
+        (:meth:`_advance_rows`) or the numba backends' copies into their rows
+        (:meth:`_load_rows`), through torch.compile with ``compile``.
         """
         cfg, g = self.config, self.generator
         unit = gauss = None

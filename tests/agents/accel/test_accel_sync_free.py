@@ -50,10 +50,7 @@ def _actions(steps: int) -> list:
 def _parts(env: TorchTetherVecEnv, a) -> None:
     """One step through its parts, as the learner's RolloutStep calls them."""
     env.action_in.copy_(a)
-    env.step_begin()
-    env.step_kernel()
-    env.step_end()
-    env.step_autoreset()
+    env.step_in_place()
 
 
 @pytest.mark.parametrize("backend", ["torch", "numba"])

@@ -33,10 +33,7 @@ def test_the_graph_replays_the_steps_it_times(bench):
         bench.ENV_KWARGS = real
     ended = 0
     for _ in range(4 * calls):
-        eager.step_begin()
-        eager.step_kernel()
-        eager.step_end()
-        eager.step_autoreset()
+        eager.step_in_place()
         ended += int(eager.outputs.ended.sum())
     assert graph.captured and ended >= 6
     for name in ("y", "nu", "u", "obs", "steps", "par", "noise"):
