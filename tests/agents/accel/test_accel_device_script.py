@@ -35,6 +35,18 @@ def _commands(script: str) -> list[list[str]]:
     return out
 
 
+def _tries(script: str) -> list[tuple[str, list[str]]]:
+    """The script's ``TRIES`` entries, ``"backend|flags"`` ($FLAGS expanded), in order."""
+    text = (ROOT / "bench" / script).read_text()
+    found = re.search(r'^FLAGS="([^"]*)"', text, re.M)
+    flags = found.group(1) if found else ""
+    block = re.search(r"^TRIES=\((.*?)^\)", text, re.M | re.S)
+    if block is None:
+        return []
+    entries = re.findall(r'^\s*"([^"|]*)\|([^"]*)"', block.group(1), re.M)
+    return [(b, f.replace("$FLAGS", flags).split()) for b, f in entries]
+
+
 def _help_flags(argv: list[str]) -> set[str]:
     done = subprocess.run([sys.executable, *argv, "--help"], capture_output=True, text=True,
                           cwd=ROOT, timeout=120)
@@ -81,3 +93,20 @@ def test_every_flag_is_one_its_script_takes(script):
                     if value.startswith("--"):
                         break
                     assert value in BACKENDS or value.startswith("VAR_"), value
+
+
+def test_the_training_tries_are_commands_train_py_takes():
+    """gpu_session4.sh's fallbacks (``TRIES``): each backend is one the env has, each
+    flag one ``train.py gpu`` takes, no two alike, and the first is the fastest path:
+    numba-cuda with the five flags of ``$FLAGS``."""
+    from tether_gym_agents.accel.vec_env import BACKENDS
+
+    tries = _tries("gpu_session4.sh")
+    assert len(tries) >= 3, tries
+    assert tries[0] == ("numba-cuda", ["--cuda-graphs", "--sync-free", "--compile",
+                                       "--compile-update", "--compile-rollout"])
+    assert len({(b, tuple(f)) for b, f in tries}) == len(tries), tries
+    flags = _help_flags(["train.py", "gpu"])
+    for backend, words in tries:
+        assert backend in BACKENDS, backend
+        assert words and all(w in flags for w in words), (backend, words)
