@@ -172,7 +172,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "so that the host does not wait for the device at each step")
     p.add_argument("--max-seconds", type=float, default=None,
                    help="stop after the update that passes this wall time [s] (start-up "
-                        "included); the runs record the steps reached")
+                        "included); the runs record the steps reached, and a linear "
+                        "learning rate falls to 0 at this time, counted from the end of "
+                        "the first update (compiles and captures)")
     return p
 
 

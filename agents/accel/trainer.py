@@ -47,7 +47,7 @@ from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
 
-__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE"]
+__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE", "progress_remaining"]
 
 TRAIN_LOG_FILE = "train_log.json"
 
@@ -79,7 +79,8 @@ class GpuRun:
 
     ``seeds``: trained at once; ``timesteps``: env steps per seed; ``max_seconds``: stop
     after the first update that ends later than this wall time [s] (counted from
-    ``clock_start``), the runs then record the steps they reached; ``checkpoints``:
+    ``clock_start``), the runs then record the steps they reached, and a linear learning
+    rate falls to 0 there (:func:`progress_remaining`); ``checkpoints``:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
     ``compile``: the env's torch arithmetic through ``torch.compile``; ``backend``: the
     env's step backend (:class:`TorchTetherVecEnv`, both; the final check runs the torch
@@ -170,16 +171,18 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     history: list[dict[str, Any]] = []
     steps = 0
     lr = torch.full((S,), settings.learning_rate, device=device)  # adaptive: per seed
+    startup = math.nan  # [s] from t0 to the end of the first update (compiles, captures)
     for update in range(1, n_updates + 1):
-        # the linear schedule falls to 0 at the step budget, or at the time budget first
-        progress = 1.0 - max(steps / (n_updates * per_rollout),
-                             (time.perf_counter() - t0) / max_seconds)
+        progress = progress_remaining(steps / (n_updates * per_rollout),
+                                      time.perf_counter() - t0, max_seconds, startup)
         if settings.lr_schedule != "adaptive":
             lr.fill_(learning_rate_at(settings, progress))
         with torch.no_grad():
             collect()
         steps += per_rollout
         _update(policy, opt, lr, settings, rollout.batch, minibatch_steps)
+        if update == 1:
+            startup = time.perf_counter() - t0
         out_of_time = time.perf_counter() - t0 > max_seconds
         if update in marks or out_of_time:
             wall = time.perf_counter() - t0
@@ -304,6 +307,26 @@ def _collector(rollout: Rollout, env: TorchTetherVecEnv, T: int,
     if whole:  # the env's draws and the actions' (torch's default generator) inside
         return GraphedCall(rollout_steps, generators=(env.generator,))
     return rollout_steps
+
+
+def progress_remaining(step_fraction: float, elapsed: float, max_seconds: float,
+                       startup: float) -> float:
+    """What is left of the linear learning-rate schedule [-], 1 at the start, 0 at the end.
+
+    It falls to 0 at the step budget (``step_fraction`` [-] of it done) or at the time
+    budget ``max_seconds`` [s], whichever comes first. The time budget's share counts
+    from the end of the first update, ``startup`` [s] after the clock's start (NaN
+    before it ends): the first update holds the start-up's one-off costs (compiling,
+    capturing CUDA graphs, warm-ups), which on a GPU can be a large part of a budget of
+    a minute, and would otherwise leave the learning rate its start value only while
+    nothing learns. ``elapsed`` [s] is the time since the clock's start. Without a time
+    budget (``max_seconds`` inf) this is SB3's ``1 - step_fraction``.
+    """
+    time_fraction = 0.0
+    if math.isfinite(max_seconds) and not math.isnan(startup):
+        left = max_seconds - startup
+        time_fraction = 1.0 if left <= 0 else (elapsed - startup) / left
+    return min(1.0, max(0.0, 1.0 - max(step_fraction, time_fraction)))
 
 
 def _permutations(epochs: int, S: int, M: int, device) -> torch.Tensor:
