@@ -83,8 +83,8 @@ class GpuRun:
     rate falls to 0 there (:func:`progress_remaining`); ``checkpoints``:
     agent snapshots per run; ``eval_episodes``: the final check's episodes per seed;
     ``compile``: the env's torch arithmetic through ``torch.compile``; ``backend``: the
-    env's step backend (:class:`TorchTetherVecEnv`, both; the final check runs the torch
-    backend, eager);
+    env's step backend (:class:`TorchTetherVecEnv`, both; the final check runs it too,
+    eager);
     ``cuda_graphs``: the rollout's pieces and the minibatch step captured as CUDA graphs
     and replayed (:mod:`.graphs`; CUDA devices, or the CPU through
     :class:`~.graphs.RecordingCapture` in the tests); ``compile_update``: the minibatch
@@ -210,7 +210,8 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
     training = [{"command": command, "num_timesteps": steps, "wall_time_s": round(wall, 1),
                  "device": str(device)}] * S
     final = evaluate_on_device(policy, obs_stats, settings, env_kwargs, device,
-                               episodes=eval_episodes, seed=int(seeds[0]) + 10_000)
+                               episodes=eval_episodes, seed=int(seeds[0]) + 10_000,
+                               backend=run.backend)
     _write_agents(runs, policy, obs_stats, env, settings, env_kwargs, training, ".")
     device_name = (torch.cuda.get_device_name(device) if device.type == "cuda" else "cpu")
     for s, folder in enumerate(runs):
@@ -230,30 +231,35 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
 
 
 def evaluate_on_device(policy, obs_stats, settings, env_kwargs, device, episodes: int,
-                       seed: int) -> dict[str, list[float]]:
+                       seed: int, backend: str = "torch") -> dict[str, list[float]]:
     """Each seed's deterministic policy over ``episodes`` whole episodes, on the device.
 
-    :func:`deterministic_episodes` with the seeds' normalised mean actions.
+    :func:`deterministic_episodes` with the seeds' normalised mean actions, on the env
+    ``backend`` (the training run's).
     """
     def act(raw: torch.Tensor) -> torch.Tensor:
         return policy.mean_action(normalize(raw, obs_stats, settings))
 
-    return deterministic_episodes(act, len(policy.seeds), env_kwargs, device, episodes, seed)
+    return deterministic_episodes(act, len(policy.seeds), env_kwargs, device, episodes, seed,
+                                  backend=backend)
 
 
 def deterministic_episodes(act, groups: int, env_kwargs, device, episodes: int,
-                           seed: int) -> dict[str, list[float]]:
+                           seed: int, backend: str = "torch") -> dict[str, list[float]]:
     """``groups`` policies over ``episodes`` whole episodes each, on the device.
 
     ``act(raw_obs)`` maps the raw observations (groups, episodes, obs_dim) to actions
     (groups, episodes, n), clipped to [-1, 1] here. The training distribution
     (``env_kwargs``), not a benchmark suite: a check of a run itself. Returns per group
     the mean episode return, the fraction of episodes that survive and the RMS of
-    theta - theta_d over the survivors' steps after orbit 1.
+    theta - theta_d over the survivors' steps after orbit 1. The env steps on
+    ``backend`` (:class:`TorchTetherVecEnv`'s, eager): a numba backend's step is one
+    kernel call where the torch port's is hundreds of operations (on a GPU, as many
+    launches); the backends are equal to 1e-12 per step.
     """
     S = groups
     env = TorchTetherVecEnv(S * episodes, device=device, seed=seed, check_actions=False,
-                            **env_kwargs)
+                            backend=backend, **env_kwargs)
     d, a = env.observation_dim, env.n
     raw, _ = env.reset()
     alive = torch.ones((S, episodes), dtype=torch.bool, device=device)

@@ -105,3 +105,53 @@ def test_compile_fuses_the_torch_parts_bitwise(mode):
 def test_numba_backend_needs_the_cpu():
     with pytest.raises(ValueError, match="on the CPU, got device='cuda'"):
         check_backend("numba", torch.device("cuda"))
+
+
+def test_the_final_check_runs_on_the_training_backend():
+    """``train.py gpu``'s final check (``deterministic_episodes``) on the numba backend,
+    which a numba run now uses, scores what the torch port scores: the same survivals
+    and, to 1e-9, the same returns and tracking errors, for a policy that holds the reels
+    (every episode survives) and one that swings them in half the episodes (which fail)."""
+    from tether_gym_agents.accel.trainer import deterministic_episodes
+
+    env_kwargs = {"increment_gain": 0.5, "orbits_per_episode": 1.5, "mass_range": 0.25,
+                  "eccentricity_range": (0.0, 0.35), "init_theta_range": 0.15}
+
+    def hold(raw):
+        return torch.zeros(raw.shape[:-1] + (2,), dtype=torch.float64)
+
+    def hold_or_swing(raw):  # the first half of each group's episodes hold, the rest fail
+        swing = torch.tanh(3.0 * raw[..., 2:4].double())
+        return torch.where(torch.arange(8)[:, None] < 4, hold(raw), swing)
+
+    for act, survivors in ((hold, (1.0, 1.0)), (hold_or_swing, (0.5, 0.5))):
+        out = {b: deterministic_episodes(act, 2, env_kwargs, torch.device("cpu"), 8, 3,
+                                         backend=b) for b in ("torch", "numba")}
+        assert out["torch"]["survived"] == out["numba"]["survived"] == list(survivors)
+        np.testing.assert_allclose(out["numba"]["mean_return"], out["torch"]["mean_return"],
+                                   rtol=1e-9)
+        for r_n, r_t in zip(out["numba"]["tracking_rms"], out["torch"]["tracking_rms"],
+                            strict=True):
+            assert (r_n is None) == (r_t is None)
+            if r_t is not None:
+                assert r_n == pytest.approx(r_t, rel=1e-9)
+
+
+def test_a_numba_run_checks_itself_on_the_numba_backend(tmp_path, monkeypatch):
+    from tether_gym_agents.accel import trainer
+    from tether_gym_agents.accel.ppo import PPOSettings
+
+    backends = []
+    real = trainer.deterministic_episodes
+
+    def recorded(*args, **kwargs):
+        backends.append(kwargs["backend"])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(trainer, "deterministic_episodes", recorded)
+    settings = PPOSettings(n_envs=2, n_steps=4, batch_size=8, n_epochs=1, net_arch=(8, 8))
+    run = trainer.GpuRun([0], 16, {"increment_gain": 0.5, "orbits_per_episode": 0.05},
+                         tmp_path, torch.device("cpu"), checkpoints=1, eval_episodes=2,
+                         backend="numba")
+    summary = trainer.train_seeds(settings, run, log=None)
+    assert backends == ["numba"] and summary["final"]["survived"]
