@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The learning rate's size (experiments/issue34/README.md, "The learning rate's size",
+# 2026-12-07): I (J's geometry, 672 iterations) with its rate 1e-3, N with 2e-3 and O with
+# 3e-3, seeds 0-1 in one process each; N's seeds 2-5 and 6-9, four per process; then
+# the default-suite scores and N's learning curves. Two processes at a time (one per
+# core, one thread each); resumable: a run folder with its agent is skipped. About 45
+# minutes on the 2-core development machine. Run it with the project's environment
+# active.
+set -u
+cd "$(dirname "$0")/../.."
+export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+C=experiments/issue34/cfg
+R=experiments/issue34/runs/learning_rate
+mkdir -p $R
+train() {  # cfg seeds first-seed folder
+  [ -f "$R/$4/seed_$3/agent.json" ] && return
+  while [ "$(jobs -rp | wc -l)" -ge 2 ]; do wait -n; done
+  python train.py gpu --config $C/$1.yml --device cpu --backend numba --seeds $2 --seed $3 \
+      --out $R/$4 > $R/$4.log 2>&1 &
+}
+train N 2 0 N
+train O 2 0 O
+train I 2 0 I
+train N 4 2 N_from2
+train N 4 6 N_from6
+wait
+python evaluate.py $R/N $R/O $R/I ppo_accel --no-plots --out $R/eval_two_seeds
+mkdir -p $R/N_ten
+cp -r $R/N/seed_* $R/N_from2/seed_* $R/N_from6/seed_* $R/N_ten/
+python evaluate.py $R/N_ten ppo_accel ppo_fast --no-plots --out $R/eval_N_ten
+python evaluate.py curves $R/N_ten --rms 7e-3 --out $R/curves_N_ten
