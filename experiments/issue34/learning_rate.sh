@@ -1,10 +1,10 @@
 #!/usr/bin/env bash
 # The learning rate's size (experiments/issue34/README.md, "The learning rate's size",
 # 2026-12-07): I (J's geometry, 672 iterations) with its rate 1e-3, N with 2e-3 and O with
-# 3e-3, seeds 0-1 in one process each; N's seeds 2-5 and 6-9, four per process; then
-# the default-suite scores and N's learning curves. Two processes at a time (one per
-# core, one thread each); resumable: a run folder with its agent is skipped. About 45
-# minutes on the 2-core development machine. Run it with the project's environment
+# 3e-3, seeds 0-1 in one process each; N's and I's seeds 2-5 and 6-9, four per process;
+# then the default-suite scores and both learning curves. Two processes at a time (one
+# per core, one thread each); resumable: a run folder with its agent is skipped. About
+# 55 minutes on the 2-core development machine. Run it with the project's environment
 # active.
 set -u
 cd "$(dirname "$0")/../.."
@@ -23,9 +23,13 @@ train O 2 0 O
 train I 2 0 I
 train N 4 2 N_from2
 train N 4 6 N_from6
+train I 4 2 I_from2
+train I 4 6 I_from6
 wait
 python evaluate.py $R/N $R/O $R/I ppo_accel --no-plots --out $R/eval_two_seeds
-mkdir -p $R/N_ten
-cp -r $R/N/seed_* $R/N_from2/seed_* $R/N_from6/seed_* $R/N_ten/
-python evaluate.py $R/N_ten ppo_accel ppo_fast --no-plots --out $R/eval_N_ten
-python evaluate.py curves $R/N_ten --rms 7e-3 --out $R/curves_N_ten
+for X in N I; do
+  mkdir -p $R/${X}_ten
+  cp -r $R/$X/seed_* $R/${X}_from2/seed_* $R/${X}_from6/seed_* $R/${X}_ten/
+  python evaluate.py curves $R/${X}_ten --rms 7e-3 --out $R/curves_${X}_ten
+done
+python evaluate.py $R/I_ten $R/N_ten ppo_accel ppo_fast --no-plots --out $R/eval_ten

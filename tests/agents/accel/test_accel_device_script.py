@@ -18,17 +18,21 @@ SCRIPTS = ("gpu_session3.sh", "gpu_session4.sh")
 
 
 def _commands(script: str) -> list[list[str]]:
-    """The script's python3 command lines (continuations joined, ``$FLAGS`` expanded,
-    the shell's other variables as placeholders), split into words."""
+    """The script's python3 command lines (continuations joined, ``$FLAGS`` and the
+    script's one-word assignments such as ``CFG=<path>`` expanded, the shell's other
+    variables as placeholders), split into words."""
     text = (ROOT / "bench" / script).read_text().replace("\\\n", " ")
     found = re.search(r'^FLAGS="([^"]*)"', text, re.M)
     flags = found.group(1) if found else ""
+    paths = dict(re.findall(r"^([A-Z]+)=([\w./-]+)$", text, re.M))  # e.g. CFG=<a path>
     out = []
     command = re.compile(r"^\s*(?:\w+=\S+\s+)*(?:timeout\s+\S+\s+)?python3\s")
     for line in text.splitlines():
         if not command.match(line):  # comments, and python3 inside an echo
             continue
         line = line.replace("$FLAGS", flags)
+        for name, value in paths.items():
+            line = line.replace(f"${name}", value)
         line = re.sub(r"\$\{?(\w+)\}?", r"VAR_\1", line)
         words = shlex.split(line.split("python3 ", 1)[1].split("|")[0])
         out.append(words)
@@ -57,8 +61,8 @@ def _help_flags(argv: list[str]) -> set[str]:
 @pytest.mark.parametrize("script", SCRIPTS)
 def test_every_flag_is_one_its_script_takes(script):
     """Each ``train.py gpu`` and ``bench/*.py`` command's flags are in its ``--help``,
-    each backend named is one the env has, and each ``-k`` expression of a pytest
-    command selects tests in its file."""
+    each backend named is one the env has, each ``--config`` a file, and each ``-k``
+    expression of a pytest command selects tests in its file."""
     from tether_gym_agents.accel.vec_env import BACKENDS
 
     commands = _commands(script)
@@ -88,6 +92,8 @@ def test_every_flag_is_one_its_script_takes(script):
         for i, word in enumerate(words):
             if word.startswith("--"):
                 assert word in helps[key], (key, word)
+            if word == "--config":
+                assert (ROOT / words[i + 1]).is_file(), words[i + 1]
             if word == "--backend":
                 for value in words[i + 1:]:
                     if value.startswith("--"):
