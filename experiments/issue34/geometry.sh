@@ -6,18 +6,8 @@
 # time (one per core, one thread each); resumable: a run folder with its agent is
 # skipped. About three hours on the 2-core development machine. Run it with the
 # project's environment active.
-set -u
-cd "$(dirname "$0")/../.."
-export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
-C=experiments/issue34/cfg
 R=experiments/issue34/runs/geometry
-mkdir -p $R
-train() {  # cfg backend seeds first-seed folder
-  [ -f "$R/$5/seed_$4/agent.json" ] && return
-  while [ "$(jobs -rp | wc -l)" -ge 2 ]; do wait -n; done
-  python train.py gpu --config $C/$1.yml --device cpu --backend $2 --seeds $3 --seed $4 \
-      --out $R/$5 > $R/$5.log 2>&1 &
-}
+. "$(dirname "$0")/jobs.sh"
 train E torch 2 0 E
 train F torch 2 0 F
 train G numba 2 0 G

@@ -6,25 +6,15 @@
 # per core, one thread each); resumable: a run folder with its agent is skipped. About
 # 55 minutes on the 2-core development machine. Run it with the project's environment
 # active.
-set -u
-cd "$(dirname "$0")/../.."
-export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
-C=experiments/issue34/cfg
 R=experiments/issue34/runs/learning_rate
-mkdir -p $R
-train() {  # cfg seeds first-seed folder
-  [ -f "$R/$4/seed_$3/agent.json" ] && return
-  while [ "$(jobs -rp | wc -l)" -ge 2 ]; do wait -n; done
-  python train.py gpu --config $C/$1.yml --device cpu --backend numba --seeds $2 --seed $3 \
-      --out $R/$4 > $R/$4.log 2>&1 &
-}
-train N 2 0 N
-train O 2 0 O
-train I 2 0 I
-train N 4 2 N_from2
-train N 4 6 N_from6
-train I 4 2 I_from2
-train I 4 6 I_from6
+. "$(dirname "$0")/jobs.sh"
+train N numba 2 0 N
+train O numba 2 0 O
+train I numba 2 0 I
+train N numba 4 2 N_from2
+train N numba 4 6 N_from6
+train I numba 4 2 I_from2
+train I numba 4 6 I_from6
 wait
 python evaluate.py $R/N $R/O $R/I ppo_accel --no-plots --out $R/eval_two_seeds
 for X in N I; do
