@@ -281,21 +281,14 @@ class TorchTetherVecEnv:
         self.single_observation_space = observation_space(self.config)
         self.single_action_space = action_space(self.config)
         self.cc = chain_consts(self.config, self.device, dtype)
-        cc = self.cc
-
-        def control_step(*tensors):
-            return chain.control_step(*tensors, cc)
-
         self.backend = backend
         self._kernel: Any = None  # the numba row step, with backend "numba" or "numba-cuda"
-        self._control_step: Any
         if backend == "numba":
             self._kernel = NumbaCpuStep(self.config, self.num_envs, self.device)
         elif backend == "numba-cuda":
             from .numba_cuda import NumbaCudaStep
 
             self._kernel = NumbaCudaStep(self.config, self.num_envs, self.device)
-        self._control_step = control_step if self._kernel is None else self._kernel
         # a numba backend's torch arithmetic around its kernel: the step's inputs (its
         # rows, its disturbance and noise from the draws, the copies into the kernel's
         # rows), the results into the rows and the step's outputs, the starts and their
@@ -810,8 +803,8 @@ class TorchTetherVecEnv:
         """
         rows = self._live_rows(rows)
         self._step_draws(rows, unit, gauss)
-        self._advance_end(self._control_step(self.nu, self.y, self.u, a, self.disturbance,
-                                             self.noise, self.par), rows)
+        self._advance_end(chain.control_step(self.nu, self.y, self.u, a, self.disturbance,
+                                             self.noise, self.par, self.cc), rows)
 
     def _live_rows(self, rows: torch.Tensor | None) -> torch.Tensor:
         """``rows``, or with None the rows that did not end, written into ``_rows``."""

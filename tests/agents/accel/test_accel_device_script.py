@@ -17,13 +17,18 @@ ROOT = Path(__file__).resolve().parents[3]
 SCRIPTS = ("gpu_session3.sh", "gpu_session4.sh")
 
 
+def _flags(text: str) -> str:
+    """The script's ``FLAGS="..."`` value ("" where it sets none)."""
+    found = re.search(r'^FLAGS="([^"]*)"', text, re.M)
+    return found.group(1) if found else ""
+
+
 def _commands(script: str) -> list[list[str]]:
     """The script's python3 command lines (continuations joined, ``$FLAGS`` and the
     script's one-word assignments such as ``CFG=<path>`` expanded, the shell's other
     variables as placeholders), split into words."""
     text = (ROOT / "bench" / script).read_text().replace("\\\n", " ")
-    found = re.search(r'^FLAGS="([^"]*)"', text, re.M)
-    flags = found.group(1) if found else ""
+    flags = _flags(text)
     paths = dict(re.findall(r"^([A-Z]+)=([\w./-]+)$", text, re.M))  # e.g. CFG=<a path>
     out = []
     command = re.compile(r"^\s*(?:\w+=\S+\s+)*(?:timeout\s+\S+\s+)?python3\s")
@@ -42,8 +47,7 @@ def _commands(script: str) -> list[list[str]]:
 def _tries(script: str) -> list[tuple[str, list[str]]]:
     """The script's ``TRIES`` entries, ``"backend|flags"`` ($FLAGS expanded), in order."""
     text = (ROOT / "bench" / script).read_text()
-    found = re.search(r'^FLAGS="([^"]*)"', text, re.M)
-    flags = found.group(1) if found else ""
+    flags = _flags(text)
     block = re.search(r"^TRIES=\((.*?)^\)", text, re.M | re.S)
     if block is None:
         return []
