@@ -191,7 +191,7 @@ def main(argv=None, clock_start: float | None = None) -> int:
         return 2
     from dataclasses import replace
 
-    from .trainer import GpuRun, train_seeds
+    from .trainer import GpuRun, check_out, train_seeds
     from .vec_env import check_backend, resolve_device
 
     try:
@@ -226,10 +226,11 @@ def main(argv=None, clock_start: float | None = None) -> int:
             raise GpuConfigError(f"--cuda-graphs needs a CUDA device (--device cuda or "
                                  f"auto on a GPU machine), got --device {args.device!r} "
                                  f"-> {device}")
+        seeds = list(range(args.seed, args.seed + args.seeds))
+        check_out(args.out, seeds)  # last: it makes the seed folders
     except (ValueError, ImportError) as exc:
         print(f"train.py gpu: error: {exc}", file=sys.stderr)
         return 2
-    seeds = list(range(args.seed, args.seed + args.seeds))
     command = "python train.py gpu " + " ".join(shlex.quote(a) for a in argv)
     print(f"train.py gpu: {len(seeds)} seed(s) x {settings.n_envs} envs on {device}, "
           f"{steps} env steps per seed -> {args.out}")

@@ -27,12 +27,17 @@ import tether_gym
 from ..files.run_folder import (
     CHECKPOINT_AGENT_PREFIX,
     CHECKPOINT_DIR,
+    COMMAND_FILE,
+    CONFIG_FILE,
+    TRAIN_INFO_FILE,
     append_command,
+    check_fresh_run_folder,
+    check_writable_folder,
     seed_dir,
     write_config,
     write_train_info,
 )
-from ..files.safe_format import ObsNormalization, save_agent
+from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE, ObsNormalization, save_agent
 from .graphs import GraphedCall, GraphedUpdate, RolloutStep
 from .minibatch import (
     ADAM_EPS,
@@ -47,9 +52,38 @@ from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
 
-__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE", "progress_remaining"]
+__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE", "progress_remaining", "check_out"]
 
 TRAIN_LOG_FILE = "train_log.json"
+WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, TRAIN_INFO_FILE, CONFIG_FILE, COMMAND_FILE,
+                 TRAIN_LOG_FILE)
+"""The files each ``OUT/seed_K/`` gets at its top (besides ``checkpoints/``)."""
+
+
+def check_out(out: Path, seeds: list[int]) -> None:
+    """Refuse an ``--out`` that the run could not write, or that holds an earlier run.
+
+    ``out`` must be a folder (or not exist yet), and every ``out/seed_K`` a fresh run
+    folder (:func:`check_fresh_run_folder`): this learner has no resume, so its
+    checkpoints would land beside an earlier run's and ``evaluate.py curves`` would read
+    both. Called before any work starts; it makes the folders.
+
+    Raises
+    ------
+    ValueError
+        Naming the folder and what is wrong.
+    """
+    seed_runs = [seed_dir(out, k) for k in seeds]
+    folder = Path(out)
+    try:
+        if folder.exists() and not folder.is_dir():
+            check_writable_folder(folder, ())  # its message
+        for folder in seed_runs:
+            check_fresh_run_folder(folder, WRITTEN_FILES, "give a new --out, or remove "
+                                   "that folder first (this learner has no --resume)")
+    except ValueError as exc:
+        where = "" if folder == Path(out) else f"{folder}: "
+        raise ValueError(f"--out {str(out)!r}: {where}{exc}") from None
 
 
 def _sb3_policy(policy: MultiSeedPolicy, s: int, env: TorchTetherVecEnv, settings: PPOSettings):

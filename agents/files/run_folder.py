@@ -84,7 +84,8 @@ __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_
            "append_command", "check_command_file", "evaluations_path", "read_evaluations",
            "write_evaluations",
            "saved_models", "checkpoint_steps", "checkpoint_agents", "seed_dir", "seed_runs",
-           "prune_checkpoint_buffers"]
+           "prune_checkpoint_buffers", "check_writable_folder", "earlier_run",
+           "check_fresh_run_folder"]
 
 CONFIG_FILE = "config.yml"
 ARGS_FILE = "args.yml"
@@ -468,6 +469,88 @@ def checkpoint_steps(run: Path) -> int:
             if match and path.name.startswith(CHECKPOINT_PREFIX):
                 steps = max(steps, int(match.group(1)))
     return steps
+
+
+def check_writable_folder(out: Path, written: Sequence[str]) -> None:
+    """Refuse an output folder that a training call could not write.
+
+    ``out`` must exist or be creatable, take a file, and hold no folder at a ``written``
+    name (the files the call writes at its top).
+
+    Raises
+    ------
+    FolderFileError
+        Naming what is wrong; the caller puts its flag (``--out PATH:``) in front.
+    """
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise FolderFileError("is a file; give a folder (new or a run folder)")
+    for name in written:
+        if (out / name).is_dir():
+            raise FolderFileError(f"{out / name} is a folder; the run writes a file there "
+                                  "(remove or rename it)")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        probe = out / ".write_test"
+        probe.write_text("")
+        probe.unlink()
+    except OSError as exc:
+        raise FolderFileError(f"cannot write there ({exc.strerror or exc})") from None
+
+
+def earlier_run(run: Path) -> str:
+    """What an earlier training call left in ``run`` that a new run would mix with its own.
+
+    Its checkpoints (``checkpoints/*_<N>_steps*``: ``--resume`` continues the largest N,
+    and the learning curves read them all), its final model and its agents. A fresh run
+    into such a folder is refused, since its own checkpoints would land beside the old
+    ones. Empty when there are none (a new folder, or a call killed before its first
+    checkpoint).
+
+    Returns
+    -------
+    str
+        The names found, relative to ``run`` (sorted; the first three, then how many
+        more), or "" when there are none.
+    """
+    run = Path(run)
+    found = [name for name in (FINAL_MODEL_FILE, FINAL_AGENT_DIR, AGENT_FILE)
+             if (run / name).exists() or (run / name).is_symlink()]
+    folder = run / CHECKPOINT_DIR
+    if folder.is_dir():
+        found += [f"{CHECKPOINT_DIR}/{path.name}" for path in folder.iterdir()
+                  if _STEPS_IN_NAME.search(path.name)]
+    found.sort()
+    more = f" and {len(found) - 3} more" if len(found) > 3 else ""
+    return ", ".join(found[:3]) + more
+
+
+def check_fresh_run_folder(run: Path, written: Sequence[str], instead: str) -> None:
+    """Refuse ``run`` as the folder of a new training run (not a resumed one).
+
+    It must be writable (:func:`check_writable_folder`, which makes it) and hold no
+    earlier run's checkpoints or agent (:func:`earlier_run`). A refused folder keeps
+    its files.
+
+    Parameters
+    ----------
+    run : Path
+        The run folder.
+    written : sequence of str
+        The files the call writes at the top of ``run``.
+    instead : str
+        What the user can do instead, for the message ("give a new --out, ...").
+
+    Raises
+    ------
+    FolderFileError
+        Naming what is wrong; the caller puts its flag in front.
+    """
+    check_writable_folder(run, written)
+    found = earlier_run(run)
+    if found:
+        raise FolderFileError(f"already holds an earlier training run ({found}), whose "
+                              f"checkpoints a new run's would mix with; {instead}")
 
 
 # ---------------------------------------------------------------------- seed runs

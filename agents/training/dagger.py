@@ -68,24 +68,56 @@ import numpy as np
 import tether_gym
 
 from ..common.features import FeatureSpec, add_features
+from ..files.folder_paths import FolderFileError
 from ..files.run_folder import (
     CHECKPOINT_AGENT_PREFIX,
     CHECKPOINT_DIR,
+    COMMAND_FILE,
+    CONFIG_FILE,
+    TRAIN_INFO_FILE,
     append_command,
+    check_fresh_run_folder,
     write_config,
     write_train_info,
 )
-from ..files.safe_format import AgentLoadError, ObsNormalization, save_agent
+from ..files.safe_format import (
+    AGENT_FILE,
+    WEIGHTS_FILE,
+    AgentLoadError,
+    ObsNormalization,
+    save_agent,
+)
 from ..files.trained import TrainedAgent
 from .config import ConfigError, training_distribution
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "start_from",
            "InitPolicyError", "fit_student", "normalization", "train_dagger", "DATA_FILE",
-           "TRAIN_LOG_FILE", "ALGO", "MIXTURES"]
+           "TRAIN_LOG_FILE", "ALGO", "MIXTURES", "check_out"]
 
 DATA_FILE = "dagger_data.npz"
 TRAIN_LOG_FILE = "train_log.json"
+WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, DATA_FILE, TRAIN_LOG_FILE, TRAIN_INFO_FILE,
+                 CONFIG_FILE, COMMAND_FILE)
+"""The files a DAgger run writes at the top of its folder (besides ``checkpoints/``)."""
+
+
+def check_out(out: Path) -> None:
+    """Make the run folder ``out``; refuse one that holds an earlier run or cannot be written.
+
+    DAgger has no resume: a second run there would leave its checkpoints beside the
+    first run's (:func:`~tether_gym_agents.files.run_folder.check_fresh_run_folder`).
+
+    Raises
+    ------
+    FolderFileError
+        A ``ValueError`` whose message starts with ``--out 'OUT':`` and says what is wrong.
+    """
+    try:
+        check_fresh_run_folder(out, WRITTEN_FILES, "give a new --out, or remove it first "
+                               "(train.py distill has no --resume)")
+    except FolderFileError as exc:
+        raise FolderFileError(f"--out {str(out)!r}: {exc}") from None
 ALGO = "ppo"
 """The algorithm recorded in ``agent.json``: the student is a PPO-format policy (its
 ``training.method`` says ``dagger``)."""
@@ -626,7 +658,7 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
         check_env.close()
         raise
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    check_out(out)
     write_config(out, {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
                        "hyperparams": {**asdict(settings), "net_arch": list(settings.net_arch)},
                        "env_kwargs": env_kwargs})

@@ -16,6 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from ..files.folder_paths import FolderFileError
 from .dagger import (
     DATA_FILE,
     LIMITS,
@@ -23,6 +24,7 @@ from .dagger import (
     DaggerSettings,
     Dataset,
     InitPolicyError,
+    check_out,
     fmt_rate,
     train_dagger,
 )
@@ -133,11 +135,13 @@ def main(argv=None) -> int:
         print(f"{PROG}: error: the expert mpc needs CasADi: pip install -e \".[mpc]\"",
               file=sys.stderr)
         return 2
-    out = args.out if args.out is not None else f"runs/dagger/seed_{settings.seed}"
-    if Path(out).exists() and not Path(out).is_dir():
-        print(f"{PROG}: error: --out {out} is a file; give a new or an existing folder",
-              file=sys.stderr)
-        return 2
+    out = Path(args.out if args.out is not None else f"runs/dagger/seed_{settings.seed}")
+    if out.exists() or out.is_symlink():  # an earlier run there: refused before the data
+        try:                              # are read (train_dagger makes a new folder)
+            check_out(out)
+        except FolderFileError as exc:
+            print(f"{PROG}: error: {exc}", file=sys.stderr)
+            return 2
     initial = None
     for path in args.data or ():
         try:
@@ -155,6 +159,9 @@ def main(argv=None) -> int:
         summary = train_dagger(settings, out, command=command, initial=initial)
     except InitPolicyError as exc:  # refused before the run folder is written
         print(f"{PROG}: error: {_flag(str(exc))}", file=sys.stderr)
+        return 2
+    except FolderFileError as exc:  # a new --out that cannot be made or written
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
         return 2
     print(f"wrote {out}: {summary['labels']} labels in {summary['episodes']} episodes, "
           f"{summary['wall_time_s']:.1f} s ({fmt_rate(summary['labels_per_s'])}); "

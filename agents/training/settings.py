@@ -33,6 +33,8 @@ from ..files.run_folder import (
     REPLAY_BUFFER_FILE,
     TRAIN_INFO_FILE,
     VECNORMALIZE_FILE,
+    check_fresh_run_folder,
+    check_writable_folder,
     read_config,
 )
 from ..files.safe_format import ALGOS
@@ -372,7 +374,7 @@ def resolve_settings(options: TrainOptions, command: tuple[str, ...] | None = No
                                      counts["timesteps"])
         notes += [fitted] if fitted else []
     _check_sizes(params, options, counts["n_envs"], source)
-    _check_out(out)
+    _check_out(out, options.resume)
     if residual is not None:
         run["residual"] = residual.to_dict()
     if features is not None:
@@ -463,19 +465,13 @@ _WRITTEN_FILES = (CONFIG_FILE, ARGS_FILE, COMMAND_FILE, TRAIN_INFO_FILE, EVALUAT
 """Files a run writes at the top of its folder (a folder in their place is refused)."""
 
 
-def _check_out(out: Path) -> None:
-    """The run folder exists or can be made, and a file can be written in it."""
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {str(out)!r}: is a file; give a folder (new or a run folder)")
-    for name in _WRITTEN_FILES:
-        if (out / name).is_dir():
-            raise ConfigError(f"--out {str(out)!r}: {out / name} is a folder; the run writes "
-                              "a file there (remove or rename it)")
+def _check_out(out: Path, resume: bool) -> None:
+    """The run folder can be written, and a fresh run there would not mix with an older one."""
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write_test"
-        probe.write_text("")
-        probe.unlink()
-    except OSError as exc:
-        raise ConfigError(f"--out {str(out)!r}: cannot write there ({exc.strerror or exc})") \
-            from None
+        if resume:
+            check_writable_folder(out, _WRITTEN_FILES)
+        else:
+            check_fresh_run_folder(out, _WRITTEN_FILES, "continue it with --resume, or give "
+                                   "a new folder (or remove this one first)")
+    except ValueError as exc:
+        raise ConfigError(f"--out {str(out)!r}: {exc}") from None

@@ -19,6 +19,7 @@ ft=runs/distill_ppo/seed_$seed
 source experiments/issue36/set_a.sh   # parts A | B | AB
 mapfile -t data < <(parts A)
 if [ ! -f "$bc/agent.json" ]; then
+  rm -rf "$bc"   # an unfinished fit starts over (train.py distill has no resume)
   python train.py distill --data "${data[@]}" --iterations 0 --epochs 40 --batch-size 2048 \
     --check-episodes 0 --symlog-scale 1e-4 --seed "$seed" --out "$bc"
 fi

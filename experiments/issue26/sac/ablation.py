@@ -13,12 +13,14 @@ bootstrap interval over runs for the RMS).
 
 ``train`` runs the seeds one after another in this process's interpreter (start one
 process per core, each with its own cells, ``OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1``);
-a finished seed (its ``train_info.json`` says ``finished``) is skipped.
+a finished seed (its ``train_info.json`` says ``finished``) is skipped, an unfinished one
+starts over.
 """
 
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -57,6 +59,7 @@ def train(cells: list[str]) -> None:
             run = RUNS / cell / f"seed_{seed}"
             if _finished(run):
                 continue
+            shutil.rmtree(run, ignore_errors=True)  # an unfinished seed starts over
             subprocess.run([sys.executable, str(ROOT / "train.py"),
                             "--algo", ALGO.get(cell, "sac"),
                             "--config", str(HERE / "cfg" / f"{cell}.yml"), "--seed", str(seed),

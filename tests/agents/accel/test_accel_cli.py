@@ -80,6 +80,56 @@ def test_bad_backend_is_one_line_before_any_work(tmp_path, capsys, extra, messag
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("case, message", [
+    ("a file", "o': is a file; give a folder"),                # --out is a file
+    ("seed is a file", "seed_3: is a file; give a folder"),    # --out/seed_3 is a file
+    ("seed file is a folder", "train_info.json is a folder"),  # a file the run writes
+    ("/proc", "cannot write there"),
+])
+def test_unwritable_out_is_one_line_before_any_work(tmp_path, capsys, case, message):
+    out = tmp_path / "o"
+    if case == "a file":
+        out.write_text("x")
+    elif case == "seed is a file":
+        out.mkdir()
+        (out / "seed_3").write_text("x")
+    elif case == "seed file is a folder":
+        (out / "seed_3" / "train_info.json").mkdir(parents=True)
+    else:
+        out = tmp_path.root + "proc/tether_gym_run"
+    code = train_main(["gpu", "--device", "cpu", "--seed", "3", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err
+    assert err.startswith(f"train.py gpu: error: --out {str(out)!r}: ") and message in err
+
+
+def test_an_earlier_run_in_out_is_refused_and_left_as_it_was(tmp_path, capsys):
+    """No resume here: a second run into a folder with checkpoints would leave them beside
+    its own (``evaluate.py curves`` reads both), so it is refused before any work."""
+    out = tmp_path / "run"
+    tiny = ("--n-envs", "4", "--timesteps", "512")
+    first = _trained(out, *tiny)
+    before = {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    code = train_main(["gpu", "--device", "cpu", "--out", str(out), "--n-envs", "4",
+                       "--timesteps", "256"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert (f"{out / 'seed_0'}: already holds an earlier training run (agent.json, "
+            "checkpoints/") in err
+    assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == before
+    # a seed the earlier call did not train is a new run folder: it trains
+    assert _trained(out, *tiny, "--seed", "1", seed=1).keys() == first.keys()
+    # so does a call killed before its first checkpoint (its records only)
+    for name in ("agent.json", "policy.safetensors"):
+        (out / "seed_0" / name).unlink()
+    import shutil
+
+    shutil.rmtree(out / "seed_0" / "checkpoints")
+    again = _trained(out, *tiny)
+    assert all((first[k] == again[k]).all() for k in first)
+
+
 def test_the_device_scripts_configs_load():
     """The configs bench/gpu_session*.sh train with are valid for today's env id."""
     from pathlib import Path

@@ -88,3 +88,38 @@ def test_seed_runs_in_seed_order(tmp_path):
     (tmp_path / "seed_3").write_text("a file")
     assert [p.name for p in rf.seed_runs(tmp_path)] == ["seed_0", "seed_2", "seed_10"]
     assert rf.seed_runs(tmp_path / "none") == []
+
+
+def test_earlier_run_names_what_a_new_run_would_mix_with(tmp_path):
+    assert rf.earlier_run(tmp_path / "new") == "" and rf.earlier_run(tmp_path) == ""
+    # a call killed before its first checkpoint leaves records only: nothing to mix with
+    for name in (rf.CONFIG_FILE, rf.COMMAND_FILE, rf.TRAIN_INFO_FILE):
+        (tmp_path / name).write_text("x")
+    (tmp_path / rf.CHECKPOINT_DIR).mkdir()
+    (tmp_path / rf.CHECKPOINT_DIR / "notes.txt").write_text("x")
+    assert rf.earlier_run(tmp_path) == ""
+    (tmp_path / rf.CHECKPOINT_DIR / "agent_8192_steps").mkdir()
+    assert rf.earlier_run(tmp_path) == "checkpoints/agent_8192_steps"
+    for name in ("model_64_steps.zip", "model_vecnormalize_64_steps.npz"):
+        (tmp_path / rf.CHECKPOINT_DIR / name).write_bytes(b"")
+    (tmp_path / rf.FINAL_MODEL_FILE).write_bytes(b"")
+    assert rf.earlier_run(tmp_path) == ("checkpoints/agent_8192_steps, checkpoints/"
+                                        "model_64_steps.zip, checkpoints/model_vecnormalize_"
+                                        "64_steps.npz and 1 more")
+    finished = tmp_path / "finished"
+    finished.mkdir()
+    (finished / "agent.json").write_text("{}")  # a finished run without checkpoints
+    assert rf.earlier_run(finished) == "agent.json"
+
+
+def test_check_writable_folder(tmp_path):
+    rf.check_writable_folder(tmp_path / "a" / "b", ["train_info.json"])
+    assert (tmp_path / "a" / "b").is_dir() and not any((tmp_path / "a" / "b").iterdir())
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(rf.FolderFileError, match="is a file; give a folder"):
+        rf.check_writable_folder(tmp_path / "file", [])
+    with pytest.raises(rf.FolderFileError, match="cannot write there"):
+        rf.check_writable_folder(tmp_path / "file" / "sub", [])
+    (tmp_path / "c" / "train_info.json").mkdir(parents=True)
+    with pytest.raises(rf.FolderFileError, match="train_info.json is a folder"):
+        rf.check_writable_folder(tmp_path / "c", ["config.yml", "train_info.json"])

@@ -232,11 +232,31 @@ def test_bad_arguments_are_refused_before_any_work(argv, named, tmp_path, capsys
     assert not out.exists()
 
 
-def test_out_that_is_a_file_is_refused(tmp_path, capsys):
+def test_out_that_is_a_file_or_cannot_be_made_is_refused(tmp_path, capsys):
     target = tmp_path / "file"
     target.write_text("x")
     assert train_main(["distill", "--out", str(target)]) == 2
-    assert "is a file" in capsys.readouterr().err
+    assert f"--out {str(target)!r}: is a file" in capsys.readouterr().err
+    assert _train(target / "sub")[0] == 2
+    err = capsys.readouterr().err
+    assert f"--out {str(target / 'sub')!r}: cannot write there" in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_an_earlier_run_in_out_is_refused_and_left_as_it_was(run, tmp_path, capsys):
+    """No resume: a second run there would leave its checkpoints beside the first's."""
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(run[0], out)
+    files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert _train(out)[0] == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1
+    assert err.startswith(f"train.py distill: error: --out {str(out)!r}: already holds an "
+                          "earlier training run (agent.json, checkpoints/agent_")
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
 
 
 def test_expert_noise_perturbs_the_executed_action_not_the_label():

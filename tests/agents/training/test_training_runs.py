@@ -155,6 +155,24 @@ def test_out_must_be_a_writable_folder(tmp_path, capsys):
     assert "cannot write there" in capsys.readouterr().err
 
 
+def test_a_fresh_run_into_an_earlier_run_is_refused(tmp_path, capsys):
+    """Without --resume a second run into a run folder would leave its checkpoints beside
+    the first run's, and a later --resume would continue the first run's largest one."""
+    out = tmp_path / "run"
+    argv = ["--out", str(out), *FAST, *SHORT, "--eval-freq", "512", "--checkpoint-freq", "128"]
+    assert main([*argv, "--timesteps", "512"]) == 0
+    files = {p: p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    capsys.readouterr()
+    assert main([*argv, "--timesteps", "256"]) == 2
+    err = capsys.readouterr().err
+    assert len(_lines(err)) == 1 and err.startswith(f"train.py: error: --out {str(out)!r}: "
+                                                    "already holds an earlier training run (")
+    assert "checkpoints/agent_128_steps" in err and "continue it with --resume" in err
+    assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
+    assert main([*argv, "--timesteps", "128", "--resume"]) == 0  # what the message says
+    assert json.loads((out / "train_info.json").read_text())["num_timesteps"] > 512
+
+
 class _Killed(Exception):
     pass
 
