@@ -229,3 +229,40 @@ def test_compiling_on_a_cpu_without_a_compiler_is_one_line(tmp_path, capsys, mon
     err = capsys.readouterr().err
     assert f"{flag} on the CPU needs a C++ compiler" in err and "g++" in err
     assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_rollout_bytes_counts_what_the_rollout_keeps_per_sample():
+    """The memory check's formula against the tensors a Rollout allocates: its (T, S, N)
+    buffers and its batch, plus what ``finish`` and the minibatch orders add (2 float32
+    temporaries per sample; int64 orders per epoch, stacked from a list: 16 bytes) and
+    the minibatch's activations."""
+    import torch
+
+    from tether_gym_agents.accel.cli import rollout_bytes
+    from tether_gym_agents.accel.ppo import MultiSeedPolicy, PPOSettings
+    from tether_gym_agents.accel.rollout import Rollout
+
+    s, d, a = PPOSettings(n_envs=3, n_steps=5, n_epochs=4), 7, 2
+    rollout = Rollout(MultiSeedPolicy([0, 1], d, a, s, "cpu"), s, d, a, "cpu")
+    samples = 5 * 2 * 3
+
+    def kept(obj, lead):
+        return sum(t.nbytes for t in vars(obj).values()
+                   if isinstance(t, torch.Tensor) and tuple(t.shape[:len(lead)]) == lead)
+
+    buffers, batch = kept(rollout, (5, 2, 3)), kept(rollout.batch, (2, 15))
+    assert buffers == samples * 4 * (d + a + 4) and batch == samples * 4 * (d + a + 3)
+    activations = 2 * 15 * 8 * (d + a + 3 * 128)  # minibatches of min(8192, T N) = 15
+    assert rollout_bytes(s, 2, d, a) == (buffers + batch + samples * (2 * 4 + 16 * 4)
+                                         + activations)
+
+
+def test_a_rollout_past_the_memory_cap_is_one_line_before_any_work(tmp_path, capsys):
+    cfg = tmp_path / "big.yml"
+    cfg.write_text(BLOCK + "n_envs: 65536\n  n_steps: 4096\n")
+    code = train_main(["gpu", "--config", str(cfg), "--device", "cpu", "--out",
+                       str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "65536 x 4096 x 1 samples per rollout with n_epochs=10 would keep 93.0 GiB" in err
+    assert "at most 32 GiB" in err and not (tmp_path / "o").exists()
