@@ -502,10 +502,11 @@ def earlier_run(run: Path) -> str:
     """What an earlier training call left in ``run`` that a new run would mix with its own.
 
     Its checkpoints (``checkpoints/*_<N>_steps*``: ``--resume`` continues the largest N,
-    and the learning curves read them all), its final model and its agents. A fresh run
-    into such a folder is refused, since its own checkpoints would land beside the old
-    ones. Empty when there are none (a new folder, or a call killed before its first
-    checkpoint).
+    and the learning curves read them all) and the final model and agent of a finished
+    stable-baselines3 run. A fresh run into such a folder is refused, since its own
+    checkpoints would land beside the old ones. Empty when there are none: a new
+    folder, or a call killed before its first checkpoint (whose best ``agent.json``, if
+    an evaluation wrote one, the new run's first evaluation replaces).
 
     Returns
     -------
@@ -514,7 +515,7 @@ def earlier_run(run: Path) -> str:
         more), or "" when there are none.
     """
     run = Path(run)
-    found = [name for name in (FINAL_MODEL_FILE, FINAL_AGENT_DIR, AGENT_FILE)
+    found = [name for name in (FINAL_MODEL_FILE, FINAL_AGENT_DIR)
              if (run / name).exists() or (run / name).is_symlink()]
     folder = run / CHECKPOINT_DIR
     if folder.is_dir():

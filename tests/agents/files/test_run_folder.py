@@ -106,10 +106,12 @@ def test_earlier_run_names_what_a_new_run_would_mix_with(tmp_path):
     assert rf.earlier_run(tmp_path) == ("checkpoints/agent_8192_steps, checkpoints/"
                                         "model_64_steps.zip, checkpoints/model_vecnormalize_"
                                         "64_steps.npz and 1 more")
-    finished = tmp_path / "finished"
-    finished.mkdir()
-    (finished / "agent.json").write_text("{}")  # a finished run without checkpoints
-    assert rf.earlier_run(finished) == "agent.json"
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    (killed / "agent.json").write_text("{}")  # a best agent, before the first checkpoint
+    assert rf.earlier_run(killed) == ""
+    (killed / rf.FINAL_AGENT_DIR).mkdir()     # a finished SB3 run
+    assert rf.earlier_run(killed) == "final_agent"
 
 
 def test_check_writable_folder(tmp_path):

@@ -255,7 +255,7 @@ def test_an_earlier_run_in_out_is_refused_and_left_as_it_was(run, tmp_path, caps
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1
     assert err.startswith(f"train.py distill: error: --out {str(out)!r}: already holds an "
-                          "earlier training run (agent.json, checkpoints/agent_")
+                          "earlier training run (checkpoints/agent_")
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from collections import Counter
 
@@ -171,6 +172,14 @@ def test_a_fresh_run_into_an_earlier_run_is_refused(tmp_path, capsys):
     assert {p: p.read_bytes() for p in out.rglob("*") if p.is_file()} == files
     assert main([*argv, "--timesteps", "128", "--resume"]) == 0  # what the message says
     assert json.loads((out / "train_info.json").read_text())["num_timesteps"] > 512
+    # a call killed before its first checkpoint leaves at most a best agent.json: the
+    # same command starts it over
+    for name in ("checkpoints", "final_agent"):
+        shutil.rmtree(out / name)
+    (out / "final_model.zip").unlink()
+    assert (out / "agent.json").is_file()
+    assert main([*argv, "--timesteps", "256"]) == 0
+    assert json.loads((out / "train_info.json").read_text())["num_timesteps"] == 256  # from 0
 
 
 class _Killed(Exception):
