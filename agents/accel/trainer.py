@@ -73,17 +73,17 @@ def check_out(out: Path, seeds: list[int]) -> None:
     ValueError
         Naming the folder and what is wrong.
     """
-    seed_runs = [seed_dir(out, k) for k in seeds]
-    folder = Path(out)
+    out = Path(out)
     try:
-        if folder.exists() and not folder.is_dir():
-            check_writable_folder(folder, ())  # its message
-        for folder in seed_runs:
+        check_writable_folder(out, ())
+    except ValueError as exc:
+        raise ValueError(f"--out {str(out)!r}: {exc}") from None
+    for folder in (seed_dir(out, k) for k in seeds):
+        try:
             check_fresh_run_folder(folder, WRITTEN_FILES, "give a new --out, or remove "
                                    "that folder first (this learner has no --resume)")
-    except ValueError as exc:
-        where = "" if folder == Path(out) else f"{folder}: "
-        raise ValueError(f"--out {str(out)!r}: {where}{exc}") from None
+        except ValueError as exc:
+            raise ValueError(f"--out {str(out)!r}: {folder}: {exc}") from None
 
 
 def _sb3_policy(policy: MultiSeedPolicy, s: int, env: TorchTetherVecEnv, settings: PPOSettings):

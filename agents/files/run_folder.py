@@ -530,8 +530,8 @@ def check_fresh_run_folder(run: Path, written: Sequence[str], instead: str) -> N
     """Refuse ``run`` as the folder of a new training run (not a resumed one).
 
     It must be writable (:func:`check_writable_folder`, which makes it) and hold no
-    earlier run's checkpoints or agent (:func:`earlier_run`). A refused folder keeps
-    its files.
+    earlier run's checkpoints or final model (:func:`earlier_run`). A refused folder
+    keeps its files.
 
     Parameters
     ----------

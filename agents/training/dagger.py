@@ -100,24 +100,6 @@ TRAIN_LOG_FILE = "train_log.json"
 WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, DATA_FILE, TRAIN_LOG_FILE, TRAIN_INFO_FILE,
                  CONFIG_FILE, COMMAND_FILE)
 """The files a DAgger run writes at the top of its folder (besides ``checkpoints/``)."""
-
-
-def check_out(out: Path) -> None:
-    """Make the run folder ``out``; refuse one that holds an earlier run or cannot be written.
-
-    DAgger has no resume: a second run there would leave its checkpoints beside the
-    first run's (:func:`~tether_gym_agents.files.run_folder.check_fresh_run_folder`).
-
-    Raises
-    ------
-    FolderFileError
-        A ``ValueError`` whose message starts with ``--out 'OUT':`` and says what is wrong.
-    """
-    try:
-        check_fresh_run_folder(out, WRITTEN_FILES, "give a new --out, or remove it first "
-                               "(train.py distill has no --resume)")
-    except FolderFileError as exc:
-        raise FolderFileError(f"--out {str(out)!r}: {exc}") from None
 ALGO = "ppo"
 """The algorithm recorded in ``agent.json``: the student is a PPO-format policy (its
 ``training.method`` says ``dagger``)."""
@@ -616,6 +598,24 @@ def _flier(policy, norm, settings: DaggerSettings) -> Callable[[np.ndarray], np.
         return agent.predict(obs, deterministic=True)[0]
 
     return student
+
+
+def check_out(out: Path) -> None:
+    """Make the run folder ``out``; refuse one that holds an earlier run or cannot be written.
+
+    DAgger has no resume: a second run there would leave its checkpoints beside the
+    first run's (:func:`~tether_gym_agents.files.run_folder.check_fresh_run_folder`).
+
+    Raises
+    ------
+    FolderFileError
+        A ``ValueError`` whose message starts with ``--out 'OUT':`` and says what is wrong.
+    """
+    try:
+        check_fresh_run_folder(out, WRITTEN_FILES, "give a new --out, or remove it first "
+                               "(train.py distill has no --resume)")
+    except FolderFileError as exc:
+        raise FolderFileError(f"--out {str(out)!r}: {exc}") from None
 
 
 def _save(folder: Path, policy, norm, env_kwargs: dict, training: dict,

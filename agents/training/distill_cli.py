@@ -136,8 +136,10 @@ def main(argv=None) -> int:
               file=sys.stderr)
         return 2
     out = Path(args.out if args.out is not None else f"runs/dagger/seed_{settings.seed}")
-    if out.exists() or out.is_symlink():  # an earlier run there: refused before the data
-        try:                              # are read (train_dagger makes a new folder)
+    # an earlier run there is refused before the data are read; a new folder is made
+    # (and checked) by train_dagger, after its own refusals
+    if out.exists() or out.is_symlink():
+        try:
             check_out(out)
         except FolderFileError as exc:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
