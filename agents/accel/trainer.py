@@ -29,6 +29,7 @@ from ..files.run_folder import (
     CHECKPOINT_DIR,
     COMMAND_FILE,
     CONFIG_FILE,
+    ITERATION_LOG_FILE,
     TRAIN_INFO_FILE,
     append_command,
     check_fresh_run_folder,
@@ -52,11 +53,10 @@ from .ppo import MultiSeedPolicy, PPOSettings, learning_rate_at
 from .rollout import Rollout, RolloutBatch, normalize
 from .vec_env import TorchTetherVecEnv
 
-__all__ = ["train_seeds", "GpuRun", "TRAIN_LOG_FILE", "progress_remaining", "check_out"]
+__all__ = ["train_seeds", "GpuRun", "progress_remaining", "check_out"]
 
-TRAIN_LOG_FILE = "train_log.json"
 WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, TRAIN_INFO_FILE, CONFIG_FILE, COMMAND_FILE,
-                 TRAIN_LOG_FILE)
+                 ITERATION_LOG_FILE)
 """The files each ``OUT/seed_K/`` gets at its top (besides ``checkpoints/``)."""
 
 
@@ -257,7 +257,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                                "num_timesteps": steps, "wall_time_s": round(wall, 1),
                                "final_training_distribution": {
                                    k: v[s] for k, v in final.items()}})
-        (folder / TRAIN_LOG_FILE).write_text(json.dumps(
+        (folder / ITERATION_LOG_FILE).write_text(json.dumps(
             [{**h, "episodes": h["episodes"][s], "failed": h["failed"][s],
               "mean_return": h["mean_return"][s]} for h in history], indent=1))
     return {"steps_per_seed": steps, "seeds": S, "wall_time_s": wall,

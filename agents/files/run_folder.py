@@ -76,6 +76,7 @@ __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_
            "EVALUATIONS_FILE", "LEARNING_CURVE_FILE", "TB_DIR", "FINAL_AGENT_DIR",
            "BEST_MODEL_FILE", "FINAL_MODEL_FILE", "VECNORMALIZE_FILE", "REPLAY_BUFFER_FILE",
            "CHECKPOINT_DIR", "CHECKPOINT_PREFIX", "CHECKPOINT_AGENT_PREFIX", "TRAIN_LOG_FILE",
+           "ITERATION_LOG_FILE",
            "SEED_CURVES_FILE",
            "FANOUT_LOG_FILE", "SavedModel", "DamagedFileError", "atomic_target",
            "last_write_time", "evaluation_arrays", "evaluation_rows", "write_text_atomic",
@@ -110,6 +111,10 @@ CHECKPOINT_AGENT_PREFIX = "agent"
 whose ``agent.json`` records the steps and the run's wall time then (learning curves
 against wall-clock time, evaluated afterwards on any suite)."""
 TRAIN_LOG_FILE = "train.log"
+"""The fan-out's text log of one run's console output (``train.py fanout``)."""
+ITERATION_LOG_FILE = "train_log.json"
+"""The in-process learners' per-iteration records (``train.py gpu``: its training
+episodes per checkpoint; ``train.py distill``: one record per DAgger iteration)."""
 SEED_CURVES_FILE = "learning_curves.png"
 FANOUT_LOG_FILE = "fanout.log"
 

@@ -74,6 +74,7 @@ from ..files.run_folder import (
     CHECKPOINT_DIR,
     COMMAND_FILE,
     CONFIG_FILE,
+    ITERATION_LOG_FILE,
     TRAIN_INFO_FILE,
     append_command,
     check_fresh_run_folder,
@@ -93,12 +94,11 @@ from .config import ConfigError, training_distribution
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "start_from",
            "InitPolicyError", "fit_student", "normalization", "train_dagger", "DATA_FILE",
-           "TRAIN_LOG_FILE", "ALGO", "MIXTURES", "check_out"]
+           "ALGO", "MIXTURES", "check_out"]
 
 DATA_FILE = "dagger_data.npz"
-TRAIN_LOG_FILE = "train_log.json"
-WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, DATA_FILE, TRAIN_LOG_FILE, TRAIN_INFO_FILE,
-                 CONFIG_FILE, COMMAND_FILE)
+WRITTEN_FILES = (AGENT_FILE, WEIGHTS_FILE, DATA_FILE, ITERATION_LOG_FILE,
+                 TRAIN_INFO_FILE, CONFIG_FILE, COMMAND_FILE)
 """The files a DAgger run writes at the top of its folder (besides ``checkpoints/``)."""
 ALGO = "ppo"
 """The algorithm recorded in ``agent.json``: the student is a PPO-format policy (its
@@ -738,7 +738,7 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
     wall = time.perf_counter() - t0
     _save(out, policy, norm, env_kwargs, training, student_features(settings))
     data.save(out / DATA_FILE)
-    (out / TRAIN_LOG_FILE).write_text(json.dumps(history, indent=1))
+    (out / ITERATION_LOG_FILE).write_text(json.dumps(history, indent=1))
     summary = {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
                "seed": settings.seed, "command": command, "status": "finished",
                "tether_gym": tether_gym.__version__, "torch": torch.__version__,

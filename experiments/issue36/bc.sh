@@ -19,6 +19,9 @@ case $1 in
                          --check-episodes 0 --seed 0 --symlog-scale 1e-4) ;;
   *) echo "unknown fit $1" >&2; exit 2 ;;
 esac
-python train.py distill "${args[@]}" --out "runs/bc/$1"
+if [ ! -f "runs/bc/$1/agent.json" ]; then   # a finished fit is kept (remove it to fit again)
+  rm -rf "runs/bc/$1"   # an unfinished fit starts over (train.py distill has no resume)
+  python train.py distill "${args[@]}" --out "runs/bc/$1"
+fi
 python evaluate.py "runs/bc/$1" "filtered:runs/bc/$1" --seeds 3 --no-plots \
   --out "runs/bc_eval/$1"

@@ -11,6 +11,10 @@ LR=${2:-3e-6}
 IT=${3:-1}
 OUT=${4:-runs/dagger_ft_row/seed_$K}
 export OMP_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+if [ -f "$OUT/agent.json" ]; then   # a finished run is kept (remove it to run again)
+  echo "kept $OUT (finished)"; exit 0
+fi
+rm -rf "$OUT"   # an unfinished run starts over (train.py distill has no resume)
 python train.py distill --init-policy "distill_ppo/seed_{seed}" --symlog-scale 1e-4 \
   --iterations "$IT" --episodes 8 --beta-decay 0 --epochs 20 --learning-rate "$LR" \
   --check-episodes 8 --seed "$K" --out "$OUT"

@@ -11,6 +11,10 @@ case $v in
 esac
 out=runs/observe/$v/seed_$s
 mkdir -p $(dirname $out)
+if [ -f "$out/final_agent/agent.json" ]; then   # finished: kept (remove it to train again)
+  echo "$(date -u +%T) kept v=$v s=$s (finished)"; exit 0
+fi
+rm -rf "$out"   # an unfinished run starts over (train.py refuses to mix two runs in one folder)
 start=$(date +%s)
 python train.py --algo ppo --seed $s --timesteps 1000000 --env-kwargs $kw --out $out --no-progress > runs/observe/${v}_s${s}.log 2>&1
 rc=$?

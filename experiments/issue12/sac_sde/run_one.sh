@@ -8,6 +8,10 @@ cd "$(dirname "$0")/../../.." && source .venv/bin/activate   # the repository ro
 export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 MKL_NUM_THREADS=1
 out=runs/sac_sde/seed_$s
 mkdir -p runs/sac_sde
+if [ -f "$out/final_agent/agent.json" ]; then   # finished: kept (remove it to train again)
+  echo "$(date -u +%T) kept s=$s (finished)"; exit 0
+fi
+rm -rf "$out"   # an unfinished run starts over (train.py refuses to mix two runs in one folder)
 start=$(date +%s)
 python train.py --algo sac --seed "$s" --timesteps 800000 --config "$here/sac_sde.yml" --out "$out" --no-progress \
   > "runs/sac_sde/s${s}.log" 2>&1

@@ -16,6 +16,10 @@ yscale=$(python -c "import sys; print(float(sys.argv[1]))" "$scale") || exit 2  
 sed "s/features: {name: symlog_errors, scale: [0-9.e-]*}/features: {name: symlog_errors, scale: $yscale}/" \
   agents/configs/ppo_symlog.yml > "$config"
 grep -q "scale: $yscale}" "$config" || { echo "could not set the scale in $config"; exit 2; }
+if [ -f "$out/final_agent/agent.json" ]; then   # finished: kept (remove it to train again)
+  echo "$(date -u +%T) kept s=$s S=$scale (finished)"; exit 0
+fi
+rm -rf "$out"   # an unfinished run starts over (train.py refuses to mix two runs in one folder)
 start=$(date +%s)
 python train.py --algo ppo --seed "$s" --timesteps 1000000 --config "$config" --out "$out" \
   --no-progress > "$folder/s${s}.log" 2>&1

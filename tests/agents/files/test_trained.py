@@ -16,7 +16,7 @@ from tether_gym_agents.evaluation.registry import (
     make_policy,
     resolve_policy,
 )
-from tether_gym_agents.files.run_folder import seed_runs
+from tether_gym_agents.files.run_folder import ITERATION_LOG_FILE, seed_runs
 from tether_gym_agents.files.safe_format import AGENT_FILE, load_agent
 from tether_gym_agents.files.trained import PRETRAINED_DIR, TrainedAgent, pretrained_agents
 from tether_gym_agents.training.settings import ALGOS
@@ -61,7 +61,7 @@ def test_every_run_is_complete_and_acts_on_the_current_env(name):
         info = json.loads((run / "train_info.json").read_text())
         # a behaviour-cloned seed (train.py distill) has no evaluations during training; a
         # train.py gpu seed logs its training episodes per checkpoint instead (issue 34)
-        files = {"dagger": RUN_FILES[:-1], "ppo_gpu": (*RUN_FILES[:-1], "train_log.json")
+        files = {"dagger": RUN_FILES[:-1], "ppo_gpu": (*RUN_FILES[:-1], ITERATION_LOG_FILE)
                  }.get(info.get("algo"), RUN_FILES)
         for file in files:
             assert (run / file).is_file(), (run, file)

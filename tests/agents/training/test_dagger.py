@@ -24,6 +24,7 @@ import tether_gym
 from tether_gym_agents.cli.evaluate import main as evaluate_main
 from tether_gym_agents.cli.train import main as train_main
 from tether_gym_agents.files import TrainedAgent
+from tether_gym_agents.files.run_folder import ITERATION_LOG_FILE
 
 pytest.importorskip("casadi")
 torch = pytest.importorskip("torch")
@@ -57,7 +58,7 @@ def test_progress_lines_and_files(run):
     lines = [line for line in text.splitlines() if line.startswith("iteration ")]
     assert [line.split()[1] for line in lines] == ["0", "1"]
     assert "(beta 1, expert acted 1.00)" in lines[0] and "(beta 0.5," in lines[1]
-    log = json.loads((out / dagger.TRAIN_LOG_FILE).read_text())
+    log = json.loads((out / ITERATION_LOG_FILE).read_text())
     per_iteration = [int(np.sum(data["iteration"] == i)) for i in range(2)]
     assert [r["labels"] for r in log] == list(np.cumsum(per_iteration))
     assert f"{log[-1]['labels']} labels" in lines[1] and "labels/s" in lines[1]
@@ -313,7 +314,7 @@ def test_shared_data_alone_is_behaviour_cloning_with_features(run, tmp_path):
     again = dict(np.load(tmp_path / "bc" / dagger.DATA_FILE))
     for key in data:
         np.testing.assert_array_equal(again[key], data[key])
-    log = json.loads((tmp_path / "bc" / dagger.TRAIN_LOG_FILE).read_text())
+    log = json.loads((tmp_path / "bc" / ITERATION_LOG_FILE).read_text())
     assert [r["labels"] for r in log] == [len(data["obs"])] and log[0]["labels_per_s"] is None
     info = json.loads((tmp_path / "bc" / "train_info.json").read_text())
     assert info["labels_per_s"] is None and "no labelling" in text
@@ -359,7 +360,7 @@ def test_shared_data_then_labelled_iterations(run, tmp_path, monkeypatch):
     assert len(more["obs"]) == shared + calls[1]
     assert set(more["iteration"][shared:].tolist()) == {1}
     assert more["episode"][shared:].min() == data["episode"].max() + 1
-    log = json.loads((tmp_path / "more" / dagger.TRAIN_LOG_FILE).read_text())
+    log = json.loads((tmp_path / "more" / ITERATION_LOG_FILE).read_text())
     assert [r["iteration"] for r in log] == [0, 1]
     assert log[1]["dropped_labels"] == calls[0] and log[1]["beta"] == 0.5
 
@@ -374,7 +375,7 @@ def test_init_policy_flies_from_iteration_1_with_its_statistics(run, tmp_path):
     code, text = _train(tmp_path / "ft", ["--init-policy", str(out), "--iterations", "1",
                                           "--beta-decay", "0"])
     assert code == 0, text
-    log = json.loads((tmp_path / "ft" / dagger.TRAIN_LOG_FILE).read_text())
+    log = json.loads((tmp_path / "ft" / ITERATION_LOG_FILE).read_text())
     assert [(r["iteration"], r["labels"], r["loss"]) for r in log][0] == (0, 0, None)
     assert log[1]["labels"] > 0 and log[1]["loss"] > 0
     assert "iteration 0 (the starting policy, before any label): 0 episodes, 0 labels" in text
