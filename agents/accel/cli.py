@@ -20,6 +20,7 @@ import time
 from dataclasses import fields
 from pathlib import Path
 
+from ..common.ranges import interval
 from ..common.yamlio import MAX_YAML_BYTES
 
 __all__ = ["main", "read_config", "DEFAULT_CONFIG"]
@@ -87,7 +88,7 @@ def _check_number(path, key, value, low, high, integer=False):
           and (not integer or float(value).is_integer()) and low <= value <= high)
     if not ok:
         what = "an integer" if integer else "a number"
-        raise GpuConfigError(f"{path}: {key}={value!r} must be {what} in [{low:g}, {high:g}]")
+        raise GpuConfigError(f"{path}: {key}={value!r} must be {what} in {interval(low, high)}")
     return kind(value)
 
 
@@ -158,8 +159,9 @@ def read_config(path: Path) -> tuple:
     checkpoints = _check_number(path, "checkpoints", doc.get("checkpoints", 10), 1, 100,
                                 integer=True)
     env_kwargs = doc.get("env_kwargs") or {}
-    if not isinstance(env_kwargs, dict):
-        raise GpuConfigError(f"{path}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    if not isinstance(env_kwargs, dict) or not all(isinstance(k, str) for k in env_kwargs):
+        raise GpuConfigError(f"{path}: env_kwargs must be a mapping of argument names, got "
+                             f"{env_kwargs!r}")
     return PPOSettings(**values), steps, env_kwargs, checkpoints
 
 
@@ -236,7 +238,10 @@ def main(argv=None, clock_start: float | None = None) -> int:
         if settings.n_envs * args.seeds > MAX_ENVS:
             raise GpuConfigError(f"n_envs x seeds = {settings.n_envs * args.seeds} must be "
                                  f"<= {MAX_ENVS}")
-        config = EnvConfig.from_kwargs(**env_kwargs)
+        try:
+            config = EnvConfig.from_kwargs(**env_kwargs)
+        except (TypeError, ValueError) as exc:  # TypeError: a value of the wrong type
+            raise GpuConfigError(f"{args.config}: env_kwargs: {exc}") from None
         need = rollout_bytes(settings, args.seeds, config.obs_dim, config.n_tethers)
         if need > MAX_ROLLOUT_BYTES:
             raise GpuConfigError(f"n_envs x n_steps x seeds = {settings.n_envs} x "

@@ -38,9 +38,13 @@ def float_array(values, shape, dtype, what: str) -> np.ndarray:
     """The inverse of :func:`float_list`, reshaped; a bad entry is a PolicyJsonError."""
     try:
         arr = np.array([float(v) for v in values], dtype=np.float64)
-        return arr.reshape(shape).astype(dtype)
     except (TypeError, ValueError) as exc:
         raise PolicyJsonError(f"{what}: {exc}") from None
+    need = math.prod(shape)
+    if arr.size != need:
+        raise PolicyJsonError(f"{what} has {arr.size} entries; allowed: {need} (one per entry "
+                              f"of shape {list(shape)})")
+    return arr.reshape(shape).astype(dtype)
 
 
 def space_to_json(space) -> dict:

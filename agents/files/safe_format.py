@@ -300,6 +300,7 @@ def load_agent(path):
         act_space = space_from_json(meta["action_space"], f"{meta_path}: action_space")
     except PolicyJsonError as exc:
         raise AgentLoadError(str(exc)) from None
+    norm = _norm_arrays(meta["obs_normalization"], obs_space.shape, meta_path)
     try:
         kwargs = settings_from_json(meta["policy_kwargs"])
     except PolicyJsonError as exc:  # its messages name the key, not the file
@@ -333,8 +334,7 @@ def load_agent(path):
     meta["hybrid"] = recorded_spec(ResidualSpec, meta.get("hybrid"), f"{meta_path}: hybrid")
     meta["features"] = recorded_spec(FeatureSpec, meta.get("features"),
                                      f"{meta_path}: features")
-    meta["obs_normalization"] = _norm_arrays(meta["obs_normalization"], obs_space.shape,
-                                             meta_path)
+    meta["obs_normalization"] = norm
     return policy, meta
 
 
@@ -413,10 +413,12 @@ def _norm_arrays(norm, shape, meta_path: Path) -> dict | None:
         raise AgentLoadError(f"{meta_path}: obs_normalization must give {list(need)} or be "
                              "null")
     try:
-        return {**norm, "mean": float_array(norm["mean"], shape, np.float64, f"{meta_path}: mean"),
-                "var": float_array(norm["var"], shape, np.float64, f"{meta_path}: var")}
+        arrays = {key: float_array(norm[key], shape, np.float64,
+                                   f"{meta_path}: obs_normalization.{key}")
+                  for key in ("mean", "var")}
     except PolicyJsonError as exc:
         raise AgentLoadError(str(exc)) from None
+    return {**norm, **arrays}
 
 
 def normalization_of(meta: dict) -> ObsNormalization | None:

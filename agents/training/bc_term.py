@@ -35,6 +35,7 @@ import numpy as np
 
 from ..common.features import add_features
 from ..common.jsonio import checked_mapping
+from ..common.ranges import interval
 from .config import ConfigError
 
 __all__ = ["BC_KEY", "BCTermSpec", "bc_term_spec", "BCTermCallback", "load_pairs"]
@@ -115,7 +116,7 @@ def bc_term_spec(value, source: str, algo: str) -> BCTermSpec | None:
               and math.isfinite(v) and low <= v <= high)
         if not ok:
             kind = "an integer" if integer else "a number"
-            raise ConfigError(f"{what}: {key} {v!r} must be {kind} in [{low:g}, {high:g}]")
+            raise ConfigError(f"{what}: {key} {v!r} must be {kind} in {interval(low, high)}")
         numbers[key] = int(v) if integer else float(v)
     return BCTermSpec(tuple(files), **numbers)
 

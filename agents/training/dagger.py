@@ -68,6 +68,7 @@ import numpy as np
 import tether_gym
 
 from ..common.features import FeatureSpec, add_features
+from ..common.ranges import interval
 from ..files.folder_paths import FolderFileError
 from ..files.run_folder import (
     CHECKPOINT_AGENT_PREFIX,
@@ -217,7 +218,7 @@ def _check_number(name: str, value, lo: float, hi: float, integer: bool) -> None
     kind = "an integer" if integer else "a number"
     ok = isinstance(value, int) if integer else isinstance(value, (int, float))
     if not ok or isinstance(value, bool) or not math.isfinite(value) or not lo <= value <= hi:
-        raise ValueError(f"{name}={value!r}: allowed {kind} in [{lo:g}, {hi:g}]")
+        raise ValueError(f"{name}={value!r}: allowed {kind} in {interval(lo, hi)}")
 
 
 # ----------------------------------------------------------------------------- data

@@ -16,6 +16,7 @@ import shlex
 import sys
 from pathlib import Path
 
+from ..common.ranges import interval
 from ..files.folder_paths import FolderFileError
 from .dagger import (
     DATA_FILE,
@@ -42,7 +43,7 @@ class _Parser(argparse.ArgumentParser):
 
 def _range(name: str) -> str:
     lo, hi = LIMITS[name]
-    return f"[{lo:g}, {hi:g}]"
+    return interval(lo, hi)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -41,13 +41,18 @@ BLOCK = "tether_gym/TetherLibration-v2:\n  "
 
 
 @pytest.mark.parametrize("text, message", [
-    (BLOCK + "n_envs: 0\n", "n_envs=0 must be an integer in"),
+    # the largest value allowed, written in full (before: [1, 4.1943e+06])
+    (BLOCK + "n_envs: 0\n", "n_envs=0 must be an integer in [1, 4194304]"),
     (BLOCK + "n_epochs: 1000000000\n", "n_epochs=1000000000 must be an integer in"),
     (BLOCK + "learning_rate: .nan\n", "learning_rate=nan"),
     (BLOCK + "bogus: 1\n", "unknown key"),
     ("n_envs: 8\n", "keyed by the env id"),
     ("a: &x [1]\nb: *x\n", "anchors"),
     ("[", "not readable YAML"),
+    # before: TypeError tracebacks from EnvConfig.from_kwargs
+    (BLOCK + "env_kwargs: {1: 2}\n", "env_kwargs must be a mapping of argument names"),
+    (BLOCK + "env_kwargs: {n_bodies: x}\n", "env_kwargs: n_bodies must be an int, got str"),
+    (BLOCK + "env_kwargs: {eccentricity: 1.5}\n", "env_kwargs: eccentricity=1.5"),
 ])
 def test_bad_config_is_one_line_naming_the_file(tmp_path, capsys, text, message):
     cfg = tmp_path / "bad.yml"
@@ -56,6 +61,7 @@ def test_bad_config_is_one_line_naming_the_file(tmp_path, capsys, text, message)
                        "--out", str(tmp_path / "o")])
     err = capsys.readouterr().err
     assert code == 2 and message in err and str(cfg) in err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
 
 
 def test_cuda_without_a_gpu_is_a_clear_error(tmp_path, capsys):

@@ -160,6 +160,12 @@ BAD = {
                   r"action_space.low=\[-1.0, -1.0, -1.0\]; allowed: a list of 2 numbers"),
     "obs box null": (_set("observation_space", "high", value=None),
                      r"observation_space.high=None"),
+    # before: numpy's "cannot reshape array of size 1 into shape (20,)", after the weights
+    "mean short": (_set("obs_normalization", "mean", value=[0.0]),
+                   r"obs_normalization.mean has 1 entries; allowed: \d+ \(one per entry of "
+                   r"shape \[\d+\]\)"),
+    "var long": (lambda meta: meta["obs_normalization"]["var"].append(1.0),
+                 r"obs_normalization.var has \d+ entries; allowed: \d+ "),
 }
 
 
