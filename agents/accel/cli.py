@@ -20,6 +20,8 @@ import time
 from dataclasses import fields
 from pathlib import Path
 
+from tether_gym.envs.vector import MAX_NUM_ENVS
+
 from ..common.ranges import interval
 from ..common.yamlio import MAX_YAML_BYTES
 
@@ -29,8 +31,8 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "gpu_ppo.yml"
 MAX_CONFIG_BYTES = MAX_YAML_BYTES
 """A config file larger than this [bytes] is refused before it is parsed."""
 MAX_SEEDS = 64
-MAX_ENVS = 1 << 22
-"""Envs per process (seeds x n_envs) at most: 4M rows, about 2 GB of float64 state."""
+MAX_ENVS = MAX_NUM_ENVS
+"""Envs per process (seeds x n_envs) at most: one vector env's cap, 4M rows."""
 MAX_ROLLOUT_BYTES = 1 << 35
 """What one iteration's samples may keep at their peak [bytes], 32 GiB
 (:func:`rollout_bytes`). Checked before any work, so that a config asking for more than

@@ -20,6 +20,7 @@ from tether_gym.envs.batch import MAX_RESET_DRAWS, StartPlan, check_startable, s
 from tether_gym.envs.config import EnvConfig
 from tether_gym.envs.layout import INFO_KEYS
 from tether_gym.envs.tether_libration import action_space, observation_space
+from tether_gym.envs.vector import check_num_envs
 from tether_gym.physics.state import PARAMS, STATE
 from tether_gym.tasks.cost import COST_NAMES
 from tether_gym.tasks.reward import COMPONENTS
@@ -222,8 +223,9 @@ class TorchTetherVecEnv:
 
     ## Arguments
 
-    ``num_envs`` (>= 1), ``device`` ("cpu", "cuda", "cuda:K" or "auto"), ``dtype``
-    (torch.float64 or torch.float32), ``seed`` (int or None), ``autoreset_mode``,
+    ``num_envs`` (1 ... 4,194,304, :data:`tether_gym.envs.vector.MAX_NUM_ENVS`),
+    ``device`` ("cpu", "cuda", "cuda:K" or "auto"), ``dtype`` (torch.float64 or
+    torch.float32), ``seed`` (int or None), ``autoreset_mode``,
     ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
     False: a NaN action turns its row's state non-finite, which terminates it as
     ``"nonfinite"``), ``compile`` (True: the torch backend's arithmetic runs through
@@ -251,11 +253,7 @@ class TorchTetherVecEnv:
                  autoreset_mode: str = "next_step", check_actions: bool = True,
                  compile: bool = False, backend: str = "torch", full_info: bool = True,
                  **env_kwargs):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-            raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
-                            f"{num_envs!r}")
-        if num_envs < 1:
-            raise ValueError(f"num_envs={num_envs!r} must be >= 1")
+        num_envs = check_num_envs(num_envs)
         if dtype not in (torch.float64, torch.float32):
             raise ValueError(f"dtype={dtype!r} must be torch.float64 or torch.float32")
         if autoreset_mode not in AUTORESET_MODES:

@@ -282,6 +282,9 @@ def test_invalid_arguments_are_rejected_with_the_value():
         make_vec(2, n_body=3)
     with pytest.raises(ValueError, match="num_envs"):
         TetherLibrationVectorEnv(0)
+    # before: 10**8 sub-envs allocated until the machine ran out of memory (10**7: 6.5 GB)
+    with pytest.raises(ValueError, match=r"num_envs=100000000 must be in \[1, 4194304\]"):
+        gym.make_vec(tether_gym.ENV_ID, num_envs=10**8)
     with pytest.raises(ValueError, match="human"):
         TetherLibrationVectorEnv(2, render_mode="human")
     with pytest.raises(ValueError, match="max_episode_steps"):

@@ -26,10 +26,27 @@ from .layout import INFO_KEYS
 from .tether_libration import action_space, eccentricity_of, observation_space
 from .threads import ThreadPolicy
 
-__all__ = ["TetherLibrationVectorEnv"]
+__all__ = ["TetherLibrationVectorEnv", "MAX_NUM_ENVS", "check_num_envs"]
 
 _PAIRED_KEYS = tuple(chain.from_iterable((key, "_" + key) for key in INFO_KEYS))
 """The vector infos' keys in gymnasium's order: each key, then its mask ``_key``."""
+
+
+MAX_NUM_ENVS = 1 << 22
+"""The most sub-envs one vector env holds (4,194,304): a sub-env keeps about 650 B of
+arrays here (2.7 GB at the cap; 10^7 sub-envs measured 6.5 GB resident), the torch
+twin's rollouts more; more envs at once: several vector envs, or several processes."""
+
+
+def check_num_envs(num_envs) -> int:
+    """``num_envs`` as an int in [1, :data:`MAX_NUM_ENVS`]; TypeError or ValueError else."""
+    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
+        raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
+                        f"{num_envs!r}")
+    if not 1 <= num_envs <= MAX_NUM_ENVS:
+        raise ValueError(f"num_envs={num_envs!r} must be in [1, {MAX_NUM_ENVS}] (one vector "
+                         "env's sub-envs; more at once: several vector envs)")
+    return int(num_envs)
 
 
 def _check_seeds(seed, num_envs: int) -> list[int | None]:
@@ -122,8 +139,9 @@ class TetherLibrationVectorEnv(VectorEnv):
 
     ## Arguments
 
-    ``num_envs`` (>= 1), ``max_episode_steps`` (see above), ``render_mode`` (None or
-    "rgb_array"; ``render()`` returns one frame per sub-env), ``parallel`` (False:
+    ``num_envs`` (1 ... :data:`MAX_NUM_ENVS` = 4,194,304), ``max_episode_steps`` (see
+    above), ``render_mode`` (None or "rgb_array"; ``render()`` returns one frame per
+    sub-env), ``parallel`` (False:
     one thread; True: split the sub-envs into one chunk per core the process may use,
     each stepped by its own thread; "auto", the default: from ``PARALLEL_MIN_ENVS`` =
     128 sub-envs on, whichever of one thread and the threads measured faster lately,
@@ -138,11 +156,7 @@ class TetherLibrationVectorEnv(VectorEnv):
 
     def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None,
                  render_mode: str | None = None, parallel: bool | str = "auto", **kwargs):
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-            raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
-                            f"{num_envs!r}")
-        if num_envs < 1:
-            raise ValueError(f"num_envs={num_envs!r} must be >= 1")
+        num_envs = check_num_envs(num_envs)
         if max_episode_steps is not None and (
                 isinstance(max_episode_steps, bool)
                 or not isinstance(max_episode_steps, (int, np.integer))

@@ -235,6 +235,8 @@ def test_bad_input_is_refused():
         env.step(torch.zeros((4, 2), dtype=torch.bool))
     with pytest.raises(ValueError, match="num_envs"):
         TorchTetherVecEnv(0)
+    with pytest.raises(ValueError, match=r"num_envs=4194305 must be in \[1, 4194304\]"):
+        TorchTetherVecEnv(4194305)
     with pytest.raises(ValueError, match="unknown argument"):
         TorchTetherVecEnv(2, eccentricty=0.1)
     if not torch.cuda.is_available():
