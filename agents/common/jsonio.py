@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-__all__ = ["to_jsonable", "sha256_file", "checked_mapping"]
+__all__ = ["to_jsonable", "sha256_file", "checked_mapping", "loads_json"]
 
 
 def to_jsonable(x):
@@ -56,3 +58,20 @@ def sha256_file(path: Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
+
+
+def loads_json(text: str | bytes, source) -> Any:
+    """The JSON document ``text`` read from ``source`` (a file's name, for the message).
+
+    Raises
+    ------
+    ValueError
+        Naming ``source``, for text that is not UTF-8 JSON or is nested too deeply for
+        Python's decoder (which recurses per level: 100k ``[`` were a RecursionError).
+    """
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{source} is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ValueError(f"{source} is not valid JSON here: nested too deeply") from None

@@ -41,10 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.jsonio import loads_json
 from ..files.folder_paths import copy_files_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
-from .benchmark import EvalOptions, evaluate
+from .benchmark import MAX_SEEDS, EvalOptions, evaluate
 from .registry import FILTERED, resolve_policy
 from .stats import iqm, run_scores, success_counts
 
@@ -52,6 +53,8 @@ __all__ = ["Threshold", "learning_curves", "curve_points", "load_curves", "write
            "DEFAULT_THRESHOLD"]
 
 CURVES_FILE = "curves.json"
+MAX_CURVE_RUNS = 10_000
+"""Seed runs a read curve may record."""
 
 
 @dataclass(frozen=True)
@@ -81,9 +84,11 @@ def curve_points(folder: Path) -> list[tuple[int, list[tuple[Path, float]]]]:
     for run in runs:
         points = {}
         for steps, agent in checkpoint_agents(run):
-            meta = json.loads(file_inside(agent, agent / AGENT_FILE).read_text())
-            training = meta.get("training", {}) if isinstance(meta, dict) else {}
-            points[steps] = (agent, float(training.get("wall_time_s", math.nan)))
+            path = file_inside(agent, agent / AGENT_FILE)
+            meta = loads_json(path.read_bytes(), path)
+            training = meta.get("training") if isinstance(meta, dict) else None
+            wall = training.get("wall_time_s") if isinstance(training, dict) else None
+            points[steps] = (agent, _wall(wall))
         per_run.append(points)
     common = sorted(set.intersection(*(set(p) for p in per_run))) if per_run else []
     return [(steps, [p[steps] for p in per_run]) for steps in common]
@@ -150,10 +155,11 @@ def load_curves(folder: Path, suite: str, n_seeds: int,
     is not a list of curves.
     """
     path = Path(folder) / CURVES_FILE
-    curves = json.loads(file_inside(folder, path).read_text())
-    if not (isinstance(curves, list) and all(isinstance(c, dict) and "points" in c
-                                            for c in curves)):
+    curves = loads_json(file_inside(folder, path).read_bytes(), path)
+    if not (isinstance(curves, list) and curves
+            and all(isinstance(c, dict) and "points" in c for c in curves)):
         raise ValueError(f"{path} is not a curves.json written by evaluate.py curves")
+    curves = [_checked_curve(c, f"{path}: curve {i}") for i, c in enumerate(curves)]
     for c in curves:
         if (c.get("suite"), c.get("seeds")) != (suite, n_seeds):
             raise ValueError(f"{path}: {c.get('policy')} was scored on suite "
@@ -161,6 +167,73 @@ def load_curves(folder: Path, suite: str, n_seeds: int,
                              f"not on {suite!r} with {n_seeds} (give --suite and --seeds)")
         c.update(_at_threshold(c["points"], c["runs"], threshold))
     return curves
+
+
+def _wall(value) -> float:
+    """A recorded wall time [s]; NaN when absent or not a finite number >= 0."""
+    ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
+          and math.isfinite(value) and value >= 0)
+    return float(value) if ok else math.nan
+
+
+def _real(value, what: str, *, optional: bool = False) -> float:
+    """A finite number (or, with ``optional``, JSON null: NaN, as it was written)."""
+    if value is None and optional:
+        return math.nan
+    if (not isinstance(value, (int, float)) or isinstance(value, bool)
+            or not math.isfinite(value)):
+        raise ValueError(f"{what}={value!r}; allowed: a finite number"
+                         + (" or null" if optional else ""))
+    return float(value)
+
+
+def _reals(values, n: int, what: str) -> list[float]:
+    """``n`` numbers or nulls (NaN)."""
+    if not isinstance(values, list) or len(values) != n:
+        raise ValueError(f"{what}={values!r}; allowed: a list of {n} numbers or nulls "
+                         "(one per seed run)")
+    return [_real(v, f"{what}[{i}]", optional=True) for i, v in enumerate(values)]
+
+
+def _checked_curve(curve: dict, what: str) -> dict:
+    """A curve of curves.json with the types :func:`write_curves` wrote; NaN for null.
+
+    ``write_curves`` writes NaN as null (strict JSON): a wall time a checkpoint did not
+    record, an RMS of no surviving episode. Anything else out of place is a ValueError
+    naming the curve and the key.
+    """
+    for key in ("policy", "suite"):
+        if not isinstance(curve.get(key), str):
+            raise ValueError(f"{what}: {key}={curve.get(key)!r}; allowed: a string")
+    for key, high in (("seeds", MAX_SEEDS), ("runs", MAX_CURVE_RUNS)):
+        value = curve.get(key)
+        if not (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= high):
+            raise ValueError(f"{what}: {key}={value!r}; allowed: an integer in [1, {high}]")
+    runs, points = curve["runs"], curve["points"]
+    if not isinstance(points, list) or not points:
+        raise ValueError(f"{what}: points={points!r}; allowed: a non-empty list")
+    checked = []
+    for k, point in enumerate(points):
+        at = f"{what}: points[{k}]"
+        if not isinstance(point, dict):
+            raise ValueError(f"{at}={point!r}; allowed: a mapping")
+        steps = point.get("steps")
+        if not (isinstance(steps, int) and not isinstance(steps, bool) and steps >= 0):
+            raise ValueError(f"{at}.steps={steps!r}; allowed: an integer >= 0")
+        ci = point.get("tracking_rms_ci95")
+        if ci is not None:
+            if not isinstance(ci, list) or len(ci) != 2:
+                raise ValueError(f"{at}.tracking_rms_ci95={ci!r}; allowed: null or "
+                                 "[low, high]")
+            ci = [_real(v, f"{at}.tracking_rms_ci95", optional=True) for v in ci]
+        checked.append({
+            **point, "steps": steps, "tracking_rms_ci95": ci,
+            "success": _real(point.get("success"), f"{at}.success"),
+            "tracking_rms": _real(point.get("tracking_rms"), f"{at}.tracking_rms",
+                                  optional=True),
+            **{key: _reals(point.get(key), runs, f"{at}.{key}")
+               for key in ("wall_time_s", "seed_success", "seed_tracking_rms")}})
+    return {**curve, "points": checked}
 
 
 def label(curve: dict) -> str:
@@ -219,6 +292,12 @@ def _alone(curves: dict) -> str:
     return f"{len(seeds)} of {curves['runs']}" + (
         f", median {np.median([s['wall_time_s'] for s in seeds]) / 60:.1f} min" if seeds
         else "")
+
+
+def _finite_median(values: list[float]) -> float:
+    """The median of the finite ``values``; NaN (no warning) when there is none."""
+    finite = [v for v in values if math.isfinite(v)]
+    return float(np.median(finite)) if finite else math.nan
 
 
 def _minutes(walls: list[float]) -> str:
@@ -298,7 +377,7 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
     for k, c in enumerate(all_curves):
         pts = c["points"]
         steps = np.array([p["steps"] for p in pts], dtype=float)
-        wall = np.array([np.nanmedian(p["wall_time_s"]) for p in pts]) / 60.0
+        wall = np.array([_finite_median(p["wall_time_s"]) for p in pts]) / 60.0
         rms = np.array([np.nan if p["tracking_rms"] is None else p["tracking_rms"]
                         for p in pts])
         ci = np.array([(np.nan, np.nan) if p["tracking_rms_ci95"] is None

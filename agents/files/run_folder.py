@@ -67,7 +67,7 @@ from typing import Any
 
 import numpy as np
 
-from ..common.jsonio import to_jsonable
+from ..common.jsonio import loads_json, to_jsonable
 from ..common.yamlio import MAX_YAML_BYTES, load_yaml_file
 from .folder_paths import FolderFileError, file_inside, folder_inside
 from .safe_format import AGENT_FILE
@@ -195,7 +195,7 @@ def read_train_info(run: Path) -> dict:
     path = Path(run) / TRAIN_INFO_FILE
     if not (path.exists() or path.is_symlink()):
         return {}
-    return json.loads(file_inside(run, path).read_text())
+    return loads_json(file_inside(run, path).read_bytes(), path)
 
 
 def trained_steps(run: Path) -> int:

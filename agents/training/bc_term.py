@@ -152,9 +152,8 @@ def load_pairs(spec: BCTermSpec, features, n_tethers: int, input_dim: int
     for name in spec.data:
         try:
             part = Dataset.load(name)
-        except (OSError, KeyError, ValueError) as exc:
-            raise ConfigError(f"{BC_KEY}: {name} is not a train.py distill dataset: "
-                              f"{exc}") from None
+        except ValueError as exc:  # its messages name the file and the key
+            raise ConfigError(f"{BC_KEY}: {exc}") from None
         x = add_features(features, part.obs, n_tethers)
         if x.shape[1] != input_dim or part.labels.shape[1] != n_tethers:
             raise ConfigError(f"{BC_KEY}: {name} gives network inputs of {x.shape[1]} and "

@@ -22,13 +22,13 @@ transitions (the final save, after training, writes all of them); see :mod:`.res
 from __future__ import annotations
 
 import io
-import json
 import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..common.jsonio import loads_json
 from ..files.agent_values import check_running_stats
 from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import atomic_target
@@ -100,7 +100,7 @@ def load_zip_weights(model, path: Path) -> None:
     try:
         _regular(path)
         with zipfile.ZipFile(path) as zf:
-            data = json.loads(zf.read("data"))
+            data = loads_json(zf.read("data"), f"{path}: data")
             tensors = {name[: -len(".pth")]: torch.load(io.BytesIO(zf.read(name)),
                                                         map_location="cpu", weights_only=True)
                        for name in zf.namelist() if name.endswith(".pth")}

@@ -91,6 +91,7 @@ from ..files.safe_format import (
 )
 from ..files.trained import TrainedAgent
 from .config import ConfigError, training_distribution
+from .dataset_file import read_dataset_arrays
 
 __all__ = ["DaggerSettings", "LIMITS", "Dataset", "Episode", "training_env_kwargs",
            "draw_episode", "make_expert", "rollout", "make_student", "start_from",
@@ -281,17 +282,21 @@ class Dataset:
 
     @classmethod
     def load(cls, path) -> Dataset:
-        """Read a :meth:`save`d ``.npz`` (no pickle)."""
-        with np.load(Path(path), allow_pickle=False) as z:
-            episodes = [{"env_seed": int(z["episode_env_seed"][k]),
-                         "eccentricity": float(z["episode_eccentricity"][k]),
-                         "masses": [float(m) for m in z["episode_masses"][k]],
-                         "beta": float(z["episode_beta"][k]),
-                         "mixture_seed": int(z["episode_mixture_seed"][k])}
-                        for k in range(len(z["episode_env_seed"]))]
-            return cls(z["obs"].astype(np.float32), z["labels"].astype(np.float64),
-                       z["iteration"].astype(np.int32), z["episode"].astype(np.int32),
-                       z["expert_acted"].astype(bool), episodes)
+        """Read a :meth:`save`d ``.npz``: no pickle, every array checked first.
+
+        Raises ``ValueError`` naming the file and the key for a file that is not one
+        (:func:`~.dataset_file.read_dataset_arrays`).
+        """
+        z = read_dataset_arrays(path)
+        episodes = [{"env_seed": int(z["episode_env_seed"][k]),
+                     "eccentricity": float(z["episode_eccentricity"][k]),
+                     "masses": [float(m) for m in z["episode_masses"][k]],
+                     "beta": float(z["episode_beta"][k]),
+                     "mixture_seed": int(z["episode_mixture_seed"][k])}
+                    for k in range(len(z["episode_env_seed"]))]
+        return cls(z["obs"].astype(np.float32), z["labels"].astype(np.float64),
+                   z["iteration"].astype(np.int32), z["episode"].astype(np.int32),
+                   z["expert_acted"].astype(bool), episodes)
 
     def extend(self, other: Dataset) -> None:
         """Append ``other``'s pairs and episodes (its episode numbers shifted after ours)."""

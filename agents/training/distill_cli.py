@@ -19,7 +19,6 @@ from pathlib import Path
 from ..common.ranges import interval
 from ..files.folder_paths import FolderFileError
 from .dagger import (
-    DATA_FILE,
     LIMITS,
     MIXTURES,
     DaggerSettings,
@@ -28,6 +27,7 @@ from .dagger import (
     check_out,
     fmt_rate,
     train_dagger,
+    training_env_kwargs,
 )
 
 __all__ = ["main", "build_parser"]
@@ -147,11 +147,10 @@ def main(argv=None) -> int:
             return 2
     initial = None
     for path in args.data or ():
-        try:
-            part = Dataset.load(path)
-        except (OSError, KeyError, ValueError) as exc:
-            print(f"{PROG}: error: --data {path}: not a readable {DATA_FILE} ({exc})",
-                  file=sys.stderr)
+        try:  # its messages name the file and the key
+            part = _fitting(Dataset.load(path), path, settings.orbits)
+        except ValueError as exc:
+            print(f"{PROG}: error: --data {exc}", file=sys.stderr)
             return 2
         if initial is None:
             initial = part
@@ -170,6 +169,19 @@ def main(argv=None) -> int:
           f"{summary['wall_time_s']:.1f} s ({fmt_rate(summary['labels_per_s'])}); "
           f"score it with: python evaluate.py {shlex.quote(str(out))}")
     return 0
+
+
+def _fitting(data: Dataset, path, orbits) -> Dataset:
+    """``data`` if its observations and labels fit the training env; else ValueError."""
+    from tether_gym.envs.config import EnvConfig
+
+    config = EnvConfig.from_kwargs(**training_env_kwargs(orbits))
+    got = (data.obs.shape[1], data.labels.shape[1])
+    if got != (config.obs_dim, config.n_tethers):
+        raise ValueError(f"{path}: observations of {got[0]} entries and labels of {got[1]}; "
+                         f"the training env gives {config.obs_dim} and takes "
+                         f"{config.n_tethers} (n_bodies {config.n_bodies})")
+    return data
 
 
 def _flag(message: str) -> str:

@@ -29,7 +29,6 @@ the training budget are exact). ``train.py --resume`` prints the count it loaded
 
 from __future__ import annotations
 
-import json
 import sys
 import zipfile
 from pathlib import Path
@@ -38,6 +37,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..common.algorithms import algorithm
+from ..common.jsonio import loads_json
 from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import (
     ARGS_FILE,
@@ -102,7 +102,7 @@ def _zip_timesteps(path: Path) -> int | None:
     """``num_timesteps`` from a model zip's plain-JSON ``data`` (nothing is unpickled)."""
     try:
         with zipfile.ZipFile(path) as zf:
-            return int(json.loads(zf.read("data"))["num_timesteps"])
+            return int(loads_json(zf.read("data"), path)["num_timesteps"])
     except (zipfile.BadZipFile, KeyError, ValueError, TypeError, OSError, EOFError):
         return None
 

@@ -4,12 +4,19 @@ from __future__ import annotations
 
 import json
 import math
+import re
+import shutil
 
 import pytest
 
 from tether_gym_agents.cli.evaluate import main as evaluate_main
 from tether_gym_agents.cli.train import main as train_main
-from tether_gym_agents.evaluation.curves import Threshold, _reached, _seed_reached
+from tether_gym_agents.evaluation.curves import (
+    Threshold,
+    _reached,
+    _seed_reached,
+    curve_points,
+)
 
 TINY = ["--n-envs", "2", "--no-progress", "--eval-freq", "256", "--checkpoint-freq", "256",
         "--eval-episodes", "1", "--timesteps", "512", "--env-kwargs",
@@ -143,3 +150,82 @@ def test_filtered_curves_refuse_increment_mode_runs_before_evaluating(two_seeds,
     assert str(two_seeds) in err and "action_mode='increment'" in err
     assert "tether_curves" not in err  # names the user's folder, not a temporary copy
     assert not out.exists()
+
+
+def _written_with(curves_out, tmp_path, edit) -> str:
+    """A folder holding curves_out's curves.json after ``edit(curves)``."""
+    folder = tmp_path / "edited"
+    folder.mkdir()
+    curves = json.loads((curves_out / "curves.json").read_text())
+    edit(curves)
+    (folder / "curves.json").write_text(json.dumps(curves))
+    return str(folder)
+
+
+def test_a_curve_without_wall_times_reads_back(curves_out, tmp_path, capsys):
+    """A checkpoint that recorded no wall time gives NaN, which curves.json holds as
+    null; reading such a file back raised TypeError in the time to threshold."""
+    def no_walls(curves):
+        for p in curves[0]["points"]:  # each point meets the threshold (a tiny run's
+            p["wall_time_s"] = [None, None]  # episodes may all fail: no RMS)
+            p.update(tracking_rms=1e-3, success=1.0, seed_tracking_rms=[1e-3, 1e-3],
+                     seed_success=[1.0, 1.0])
+    folder = _written_with(curves_out, tmp_path, no_walls)
+    out = tmp_path / "o"
+    assert evaluate_main(["curves", folder, "--suite", "paper", "--seeds", "2", "--rms", "1e9",
+                          "--success", "0", "--out", str(out)]) == 0, capsys.readouterr().err
+    (curve,) = json.loads((out / "curves.json").read_text())
+    assert curve["reached"] == {"steps": 256, "wall_time_s_median": None,
+                                "wall_time_s_range": None}
+    assert curve["per_seed"] == [{"steps": 256, "wall_time_s": None}] * 2
+    assert curve["points"][0]["wall_time_s"] == [None, None]
+
+
+def _set_point(key, value):
+    def edit(curves):
+        curves[0]["points"][0][key] = value
+    return edit
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda c: c[0].pop("runs"), r"curve 0: runs=None; allowed: an integer in \[1, 10000\]"),
+    (lambda c: c[0].update(points=[]), r"curve 0: points=\[\]; allowed: a non-empty list"),
+    (lambda c: c[0]["points"].append(7), r"curve 0: points\[\d+\]=7; allowed: a mapping"),
+    (_set_point("seed_success", [1.0]),
+     r"points\[0\].seed_success=\[1.0\]; allowed: a list of 2 numbers or nulls"),
+    (_set_point("success", "1"), r"points\[0\].success='1'; allowed: a finite number"),
+    (_set_point("steps", -1), r"points\[0\].steps=-1; allowed: an integer >= 0"),
+    (_set_point("tracking_rms_ci95", [1.0]), r"points\[0\].tracking_rms_ci95=\[1.0\]"),
+])
+def test_a_malformed_curves_json_is_one_line_naming_the_key(curves_out, tmp_path, capsys,
+                                                            edit, message):
+    """Before: KeyError / TypeError tracebacks from the time to threshold."""
+    folder = _written_with(curves_out, tmp_path, edit)
+    assert evaluate_main(["curves", folder, "--suite", "paper", "--seeds", "2",
+                          "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert f"{folder}/curves.json: " in err and re.search(message, err), err
+
+
+def test_a_deeply_nested_curves_json_is_one_line(tmp_path, capsys):
+    """Before: a RecursionError traceback from Python's JSON decoder."""
+    (tmp_path / "deep").mkdir()
+    (tmp_path / "deep" / "curves.json").write_text("[" * 100_000)
+    assert evaluate_main(["curves", str(tmp_path / "deep"), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert "curves.json is not valid JSON here: nested too deeply" in err, err
+
+
+@pytest.mark.parametrize("training", [[], {"wall_time_s": [1]}, {"wall_time_s": "x"}, "x"])
+def test_a_checkpoint_without_a_usable_wall_time_counts_as_unknown(two_seeds, tmp_path,
+                                                                   training):
+    """Before: AttributeError or TypeError for a ``training`` entry of another type."""
+    run = tmp_path / "ppo"
+    shutil.copytree(two_seeds, run)
+    agent = run / "seed_0" / "checkpoints" / "agent_256_steps" / "agent.json"
+    meta = json.loads(agent.read_text())
+    meta["training"] = training
+    agent.write_text(json.dumps(meta))
+    points = dict(curve_points(run))
+    assert math.isnan(points[256][0][1]) and points[256][1][1] >= 0

@@ -31,7 +31,7 @@ def _data(path, n=64):
     obs = np.stack([env.reset(seed=s)[0] for s in range(n)]).astype(np.float32)
     env.close()
     data = Dataset(obs, np.tile(TARGET, (n, 1)), np.zeros(n, np.int32), np.zeros(n, np.int32),
-                   np.ones(n, bool), [{"env_seed": 0, "eccentricity": 0.0, "masses": [1.0],
+                   np.ones(n, bool), [{"env_seed": 0, "eccentricity": 0.0, "masses": [1.0] * 2,
                                        "beta": 1.0, "mixture_seed": 0}])
     data.save(path)
     return path
