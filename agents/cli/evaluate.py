@@ -26,11 +26,11 @@ from pathlib import Path
 import tether_gym
 
 from ..common.env_kwargs import parse_env_kwargs
+from ..common.ranges import MAX_TORCH_THREADS
 from ..evaluation.benchmark import (
     DEFAULT_OUT_PARENT,
     MAX_SEED,
     MAX_SEEDS,
-    MAX_TORCH_THREADS,
     EvalOptions,
     check_int,
     check_out_dir,

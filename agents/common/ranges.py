@@ -1,4 +1,4 @@
-"""How a valid range is written in an error or help message.
+"""Ranges shared by several commands, and how a valid range is written in a message.
 
 Python's ``:g`` keeps six significant digits, so an integer bound such as 2**31 - 1 read
 "2.14748e+09": a user could not type the largest value allowed. :func:`interval` writes a
@@ -9,7 +9,11 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["bound_text", "interval"]
+__all__ = ["bound_text", "interval", "MAX_TORCH_THREADS"]
+
+MAX_TORCH_THREADS = 256
+"""Torch threads per process at most (``--torch-threads`` of train.py and evaluate.py):
+torch crashed the process (segmentation fault) asked for 100,000."""
 
 
 def bound_text(value: float) -> str:

@@ -30,6 +30,7 @@ import numpy as np
 
 import tether_gym
 
+from ..common.ranges import MAX_TORCH_THREADS
 from .metrics import episode_metrics
 from .registry import (
     BASELINES,
@@ -46,15 +47,13 @@ from .scenarios import Scenario, get_suite
 
 __all__ = ["evaluate", "EvalOptions", "check_int", "check_out_dir", "resolve_policy",
            "make_policy", "default_policies", "PolicyKind", "PolicySpec", "BASELINES",
-           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "MAX_TORCH_THREADS", "compute_cost",
+           "HANDOVER", "MAX_SEEDS", "MAX_SEED", "compute_cost",
            "new_out_dir", "DEFAULT_OUT_PARENT"]
 
 MAX_SEEDS = 1000
 """Upper bound of ``--seeds`` (episodes per scenario and run)."""
 MAX_SEED = 2**31 - 1
 """Largest env seed of an episode."""
-MAX_TORCH_THREADS = 256
-"""Upper bound of ``--torch-threads``."""
 DEFAULT_OUT_PARENT = Path("runs/eval")
 """Where ``evaluate.py`` without ``--out`` makes a new results folder per call."""
 

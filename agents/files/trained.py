@@ -261,11 +261,16 @@ class TrainedAgent:
         clip it to the box. Deterministic actions of a plain MLP come
         from the float64 NumPy forward pass (:attr:`mlp`), so each row of a batch is
         bitwise what it would be alone; otherwise torch's forward pass runs without
-        SB3's per-call set-up.
+        SB3's per-call set-up. An observation holding NaN or inf raises ``ValueError``
+        (it would act NaN).
         """
         import torch
 
-        obs = np.asarray(observation, dtype=np.float32)
+        with np.errstate(over="ignore"):  # beyond float32's range: inf, refused below
+            obs = np.asarray(observation, dtype=np.float32)
+        if not np.isfinite(obs).all():  # an env never returns one; NaN would act NaN
+            raise ValueError("observation holds NaN or inf (or values beyond float32's "
+                             "range); allowed: finite numbers, as the env returns them")
         if self.features is not None:
             obs = add_features(self.features, obs, self.model.action_space.shape[0])
         expected = self.model.observation_space.shape

@@ -419,7 +419,16 @@ def check_env(env_id: str, kwargs: dict, items: list[str], source: str) -> None:
         env = gym.make(env_id, **kwargs)
     except (ValueError, TypeError) as exc:
         raise ConfigError(f"invalid env kwargs ({typed}; {source}): {exc}") from None
+    except gym.error.Error as exc:  # e.g. a missing dependency of another package's env
+        raise ConfigError(f"env {env_id!r} cannot be made: {exc}") from None
+    spaces = env.observation_space, env.action_space
     env.close()
+    if not all(isinstance(space, gym.spaces.Box) and len(space.shape) == 1
+               for space in spaces):
+        got = [f"{type(space).__name__} of shape {space.shape}" for space in spaces]
+        raise ConfigError(f"env {env_id!r} observes a {got[0]} and acts with a {got[1]}; "
+                          "train.py trains MLP policies on a 1-D Box observation and 1-D "
+                          "Box (continuous) actions, as tether_gym's")
 
 
 def check_env_id(env_id: str) -> None:

@@ -75,14 +75,14 @@ def make_venv(settings: TrainSettings, n_envs: int, seed: int):
 
     from .vec_env import make_sb3_vec_env
 
-    venv: VecEnv
-    if settings.env_id == tether_gym.ENV_ID:
-        venv = make_sb3_vec_env(n_envs, seed=seed, env_kwargs=settings.env_kwargs)
-    else:  # any other registered id: SB3's generic path
+    if settings.env_id != tether_gym.ENV_ID:
+        # any other registered id: SB3's generic path (no residual or features there);
+        # its Monitor around each env reports the episodes, so no VecMonitor on top
         from stable_baselines3.common.env_util import make_vec_env
 
-        venv = make_vec_env(settings.env_id, n_envs=n_envs, seed=seed,
+        return make_vec_env(settings.env_id, n_envs=n_envs, seed=seed,
                             env_kwargs=settings.env_kwargs)
+    venv: VecEnv = make_sb3_vec_env(n_envs, seed=seed, env_kwargs=settings.env_kwargs)
     if settings.residual is not None:
         from .residual_env import ResidualVecEnv
 

@@ -22,6 +22,7 @@ import tether_gym
 
 from ..common.algorithms import algorithm
 from ..common.features import FeatureSpec
+from ..common.ranges import MAX_TORCH_THREADS
 from ..files.run_folder import (
     ARGS_FILE,
     BEST_MODEL_FILE,
@@ -67,11 +68,13 @@ SEED_MAX = 2**31 - 1
 RAY_ADDRESS_FORMS = "'auto', 'local', HOST:PORT or ray://HOST:PORT (PORT in 1 ... 65535)"
 _AT_LEAST_ONE = ("n_envs", "timesteps", "eval_freq", "checkpoint_freq", "eval_episodes",
                  "torch_threads", "seeds")
-_AT_MOST = {"timesteps": MAX_TIMESTEPS, "eval_episodes": 10_000, "seeds": 1000}
+_AT_MOST = {"timesteps": MAX_TIMESTEPS, "eval_episodes": 10_000, "seeds": 1000,
+            "torch_threads": MAX_TORCH_THREADS}
 """Upper bounds of options that would otherwise run without end (1e30 steps, 1e9
-episodes per evaluation, 1e9 Ray tasks)."""
+episodes per evaluation, 1e9 Ray tasks) or crash (100,000 torch threads)."""
 _WHY = {"timesteps": "env steps to train; the shipped runs train 3e6",
-        "eval_episodes": "episodes per evaluation", "seeds": "training runs"}
+        "eval_episodes": "episodes per evaluation", "seeds": "training runs",
+        "torch_threads": "torch threads per training process"}
 _PATHS = ("config", "out", "sweep")
 """Options that name files: made absolute in :meth:`TrainOptions.argv` (other nodes)."""
 

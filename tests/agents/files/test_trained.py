@@ -87,3 +87,15 @@ def test_agent_rejects_foreign_observation():
     agent = TrainedAgent.load(resolve_policy("ppo").runs[0])
     with pytest.raises(ValueError, match="does not fit this agent"):
         agent.predict(np.zeros(5, dtype=np.float32))
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e300])  # 1e300: inf in float32
+def test_agent_refuses_a_non_finite_observation(bad):
+    """Before: a NaN observation acted [nan, nan] (and 1e300 warned of an overflow)."""
+    agent = TrainedAgent.load(resolve_policy("ppo").runs[0])
+    obs = np.zeros(agent.observation_space.shape)
+    obs[3] = bad
+    with pytest.raises(ValueError, match="observation holds NaN or inf"):
+        agent.predict(obs)
+    with pytest.raises(ValueError, match="observation holds NaN or inf"):
+        agent.predict(np.stack([np.zeros_like(obs), obs]))  # one bad row of a batch

@@ -282,6 +282,9 @@ def test_no_training_docstring_names_only_some_algorithms():
      "--seeds 1000000000: must be an integer in [1, 1000]"),
     (["--env-kwargs", "render_mode='human'"], "invalid env kwargs (--env-kwargs "
                                               "render_mode='human'; "),
+    # before: the process died of a segmentation fault in torch.set_num_threads
+    (["--torch-threads", "100000"], "--torch-threads 100000: must be an integer in [1, 256] "
+                                    "(torch threads per training process)"),
 ])
 def test_options_that_would_run_without_end_are_bounded(tmp_path, capsys, no_training, args,
                                                         message):

@@ -6,6 +6,8 @@ with a traceback (or, for ``gamma: 2``, with NaNs some updates later).
 
 from __future__ import annotations
 
+import importlib.util
+
 import pytest
 import yaml
 
@@ -153,15 +155,35 @@ def test_budget_below_one_rollout_fits_the_rollout():
     assert "no gradient step" in fit_rollout({"learning_starts": 500}, "sac", 1, 64)[1]
 
 
-def test_pendulum_64_steps_trains_64_steps_and_says_why(tmp_path, capsys):
+def test_pendulum_64_steps_trains_64_steps_and_says_why(tmp_path, capsys, recwarn):
     out = tmp_path / "pendulum"
     assert main(["--env-id", "Pendulum-v1", "--timesteps", "64", "--out", str(out),
                  "--no-progress", "--eval-episodes", "1"]) == 0
+    # one monitor: SB3's generic path wraps each env in Monitor (before, VecMonitor on top
+    # warned that it overwrote Monitor's statistics)
+    assert not [w for w in recwarn if "already wrapped with a `Monitor`" in str(w.message)]
     text = capsys.readouterr().out
     assert "--timesteps 64 is less than one PPO rollout (n_steps 2048 x 1 env(s)" in text
     assert "trained PPO to step 64 " in text
     recorded = yaml.safe_load((out / "config.yml").read_text())["hyperparams"]
     assert recorded["n_steps"] == 64 and recorded["batch_size"] == 64
+
+
+@pytest.mark.parametrize("env_id, message", [
+    # before: an IndexError traceback from the action noise, after the run folder was made
+    ("CartPole-v1", "env 'CartPole-v1' observes a Box of shape (4,) and acts with a "
+                    "Discrete of shape (); train.py trains MLP policies on a 1-D Box"),
+    # before: gymnasium's DependencyNotInstalled traceback
+    ("CarRacing-v3", "env 'CarRacing-v3' cannot be made: "),
+])
+def test_an_env_train_py_cannot_train_is_one_line(tmp_path, capsys, env_id, message):
+    if env_id == "CarRacing-v3" and importlib.util.find_spec("Box2D") is not None:
+        pytest.skip("Box2D is installed here: CarRacing can be made")
+    out = tmp_path / "run"
+    assert main(["--env-id", env_id, "--timesteps", "64", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"train.py: error: {message}") and len(err.splitlines()) == 1, err
+    assert not out.exists()
 
 
 def test_resume_keeps_the_saved_rollout(monkeypatch, tmp_path):
