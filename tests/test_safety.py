@@ -197,6 +197,33 @@ def test_bad_margins_raise(env, kwargs, match):
         SafetyFilter.for_env(env, **kwargs)
 
 
+def test_a_chain_the_search_cannot_afford_is_refused_when_the_filter_is_built():
+    """Before: n_bodies = 12 took more than a minute per filtered step, and n_bodies = 20
+    built 3^19 search directions (the line alone, under a 4 GB limit: a MemoryError
+    after 11 s; about 240 GB of tuples in all)."""
+    from tether_gym.safety import MAX_TETHERS
+    from tether_gym.wrappers import SafetyFilterWrapper
+
+    assert MAX_TETHERS == 9
+    SafetyFilterWrapper(gym.make(tether_gym.ENV_ID, action_mode="rate", n_bodies=10))
+    for n_bodies in (11, 20):
+        env = gym.make(tether_gym.ENV_ID, action_mode="rate", n_bodies=n_bodies)
+        with pytest.raises(ValueError, match=rf"n_tethers={n_bodies - 1} must be at most 9 "
+                                             r"\(n_bodies <= 10\)"):
+            SafetyFilterWrapper(env)
+
+
+def test_substeps_beyond_the_envs_are_refused(env):
+    """Before: substeps=10**9 made each prediction run 10**9 RK4 steps: about two days per
+    filtered step (1.8 s measured at 10,000, growing linearly)."""
+    good = SafetyFilter.for_env(env)
+    kwargs = dict(params=good.par[0], n_tethers=good.n, max_reel_rate=good.max_reel_rate,
+                  physics_step=good.physics_step, length_bounds=good.length_bounds)
+    SafetyFilter(substeps=10_000, **kwargs)
+    with pytest.raises(ValueError, match=r"substeps=1000000000 must be at most 10000"):
+        SafetyFilter(substeps=10**9, **kwargs)
+
+
 @pytest.mark.parametrize("name, value", [
     ("params", "abc"), ("params", [None] * 3), ("length_bounds", "ab"),
     ("length_bounds", (0.1, "x")), ("length_bounds", 0.5)])

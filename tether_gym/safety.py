@@ -43,13 +43,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .envs.config import env_config
+from .envs.config import MIN_STEP, env_config
 from .params import as_float_tuple, check_range
 from .physics import kernels
 from .physics.layout import at
 from .physics.state import PARAMS, STATE, P
 
-__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN"]
+__all__ = ["SafetyFilter", "FilterResult", "DEFAULT_MARGIN", "MAX_TETHERS", "MAX_SUBSTEPS"]
 
 DEFAULT_MARGIN = 0.5
 """Tension margin T^_min [-] when the configuration gives none: the reward's T_safe."""
@@ -60,6 +60,15 @@ PATTERN_STEPS = 12
 """Halvings of the pattern search; the final step is the lattice spacing / 2^13."""
 MAX_LATTICE = 81
 """Largest number of lattice points of the first search stage (per state)."""
+MAX_TETHERS = 9
+"""Most tethers a filter takes (n_bodies <= 10). The search tries 3^n - 1 directions per
+stage, so its cost grows about 3.3x per tether: a filtered step of a rate-mode env
+measured 0.028 s at n_bodies = 6, 0.34 s at 8, 1.2-1.5 s at 9 and 4.4 s at 10 (one core,
+2026-12-08); at 12 one step outlasted a minute, and at 20 the 3^19 directions alone
+would take about 240 GB (built under a 4 GB limit: a MemoryError after 11 s)."""
+MAX_SUBSTEPS = round(1.0 / MIN_STEP)
+"""Most RK4 substeps per prediction: the env's most (control_step <= 1 over physics_step
+>= MIN_STEP, :mod:`tether_gym.envs.config`)."""
 
 
 class FilterResult(NamedTuple):
@@ -141,6 +150,11 @@ class SafetyFilter:
                  substeps: int, length_bounds: tuple[float, float],
                  margin: float = DEFAULT_MARGIN, length_margin: float = 0.0):
         self.n = _count("n_tethers", n_tethers)
+        if self.n > MAX_TETHERS:
+            raise ValueError(f"n_tethers={n_tethers!r} must be at most {MAX_TETHERS} "
+                             f"(n_bodies <= {MAX_TETHERS + 1}): the filter's search tries "
+                             "3^n - 1 directions, about 4.4 s per filtered step at "
+                             "n_bodies=10 and 3.3x more per added tether")
         par = np.ascontiguousarray(_reals("params", params, "a parameter row (P,) of real "
                                           "numbers, EnvConfig.param_rows").reshape(1, -1))
         if par.shape[1] != PARAMS.size(self.n):
@@ -150,6 +164,10 @@ class SafetyFilter:
         self.max_reel_rate = check_range("max_reel_rate", max_reel_rate, 0.0, low_open=True)
         self.physics_step = check_range("physics_step", physics_step, 0.0, low_open=True)
         self.substeps = _count("substeps", substeps)
+        if self.substeps > MAX_SUBSTEPS:
+            raise ValueError(f"substeps={substeps!r} must be at most {MAX_SUBSTEPS} (the "
+                             "env's most: control_step <= 1 over physics_step >= "
+                             f"{MIN_STEP:g})")
         lo, hi = as_float_tuple("length_bounds", length_bounds, 2)
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
             raise ValueError(f"length_bounds={length_bounds!r} must be finite with "
