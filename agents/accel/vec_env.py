@@ -134,6 +134,18 @@ def chain_consts(config: EnvConfig, device, dtype=torch.float64) -> chain.ChainC
         mt_index=torch.as_tensor(idx, dtype=torch.int64, device=device))
 
 
+SEED_MAX = 2**63 - 1
+"""Largest seed of the batch's generator (``torch.Generator.manual_seed`` takes 64 bits)."""
+
+
+def _checked_seed(seed) -> int:
+    """``seed`` as an int in [0, SEED_MAX] (gymnasium's rule: a non-negative integer)."""
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) \
+            or not 0 <= seed <= SEED_MAX:
+        raise ValueError(f"seed={seed!r} must be None or an integer in [0, {SEED_MAX}]")
+    return int(seed)
+
+
 class TorchTetherVecEnv:
     r"""``num_envs`` libration environments of ``TetherLibration-v2`` as torch tensors.
 
@@ -225,7 +237,7 @@ class TorchTetherVecEnv:
 
     ``num_envs`` (1 ... 4,194,304, :data:`tether_gym.envs.vector.MAX_NUM_ENVS`),
     ``device`` ("cpu", "cuda", "cuda:K" or "auto"), ``dtype`` (torch.float64 or
-    torch.float32), ``seed`` (int or None), ``autoreset_mode``,
+    torch.float32), ``seed`` (None or an int in [0, 2**63 - 1]), ``autoreset_mode``,
     ``check_actions`` (True: NaN/inf actions raise ValueError, a device sync per step;
     False: a NaN action turns its row's state non-finite, which terminates it as
     ``"nonfinite"``), ``compile`` (True: the torch backend's arithmetic runs through
@@ -271,7 +283,9 @@ class TorchTetherVecEnv:
         self.dtype = dtype
         self.num_envs = int(num_envs)
         self.autoreset_mode = autoreset_mode
-        self.check_actions = bool(check_actions)
+        if not isinstance(check_actions, bool):
+            raise TypeError(f"check_actions must be True or False, got {check_actions!r}")
+        self.check_actions = check_actions
         self.full_info = full_info
         # same-step autoreset, and without host syncs (the class docstring)
         self.same_step = autoreset_mode != "next_step"
@@ -320,7 +334,7 @@ class TorchTetherVecEnv:
         self._reference_start = (float(self._plan.ref), float(self._plan.dref))
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(np.random.SeedSequence(seed).generate_state(1)[0])
-                                   if seed is None else int(seed))
+                                   if seed is None else _checked_seed(seed))
         n, num = self.config.n_tethers, self.num_envs
         self.n = n
         m = STATE.size(n)
@@ -396,8 +410,8 @@ class TorchTetherVecEnv:
         return int(self.config.obs_dim)
 
     def seed(self, seed: int) -> None:
-        """Seed the batch's generator."""
-        self.generator.manual_seed(int(seed))
+        """Seed the batch's generator (an int in [0, 2**63 - 1])."""
+        self.generator.manual_seed(_checked_seed(seed))
 
     def reset(self, seed: int | None = None):
         """Reset every sub-env; returns (obs, info). ``seed`` reseeds the generator."""
@@ -651,7 +665,12 @@ class TorchTetherVecEnv:
         """One control step of every sub-env (see the class docstring for autoreset)."""
         if not self._was_reset:
             raise RuntimeError("call reset() before step()")
-        a = torch.as_tensor(actions, device=self.device)
+        try:
+            a = torch.as_tensor(actions, device=self.device)
+        except (TypeError, ValueError, RuntimeError, NotImplementedError) as exc:
+            raise TypeError(f"actions must be an array of real numbers of shape "
+                            f"({self.num_envs}, {self.n}), got {type(actions).__name__}: "
+                            f"{exc}") from None
         if a.dtype == torch.bool or a.is_complex():
             raise TypeError(f"actions must hold real numbers, got dtype {a.dtype}")
         if a.shape != (self.num_envs, self.n):

@@ -237,6 +237,21 @@ def test_bad_input_is_refused():
         TorchTetherVecEnv(0)
     with pytest.raises(ValueError, match=r"num_envs=4194305 must be in \[1, 4194304\]"):
         TorchTetherVecEnv(4194305)
+    # before: None and meta tensors were RuntimeError/NotImplementedError tracebacks from
+    # torch; seeds -1 and 1.5 were taken (1.5 as 1), 2**80 was "Overflow when unpacking
+    # long long", "a" "invalid literal for int()"; check_actions="no" meant True
+    for bad in (None, torch.zeros(4, 2, device="meta")):
+        with pytest.raises(TypeError, match=r"actions must be an array of real numbers of "
+                                            r"shape \(4, 2\)"):
+            env.step(bad)
+    for seed in (-1, 1.5, 2**80, "a", True):
+        with pytest.raises(ValueError, match=r"seed=.* must be None or an integer in "
+                                             r"\[0, 9223372036854775807\]"):
+            env.reset(seed=seed)
+        with pytest.raises(ValueError, match=r"seed=.* must be None or an integer"):
+            TorchTetherVecEnv(2, seed=seed)
+    with pytest.raises(TypeError, match="check_actions must be True or False, got 'no'"):
+        TorchTetherVecEnv(2, check_actions="no")
     with pytest.raises(ValueError, match="unknown argument"):
         TorchTetherVecEnv(2, eccentricty=0.1)
     if not torch.cuda.is_available():
