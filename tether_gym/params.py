@@ -39,6 +39,7 @@ __all__ = [
     "check_lengths",
     "check_finite",
     "check_range",
+    "check_count",
     "as_float_tuple",
     "renamed_error",
 ]
@@ -77,6 +78,19 @@ def check_finite(name: str, value) -> None:
     arr = np.asarray(value, dtype=float)
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name}={value!r} must be finite (no NaN or inf)")
+
+
+def check_count(name: str, value, low: int, high: int, why: str) -> int:
+    """``value`` as an int in [low, high] (``why``: what the range means, for the message).
+
+    Raises TypeError for a value that is not an integer (a bool, float or string) and
+    ValueError for one outside the range.
+    """
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise TypeError(f"{name} must be an int, got {type(value).__name__} {value!r}")
+    if not low <= value <= high:
+        raise ValueError(f"{name}={value!r} must be in [{low}, {high}] ({why})")
+    return int(value)
 
 
 def check_range(

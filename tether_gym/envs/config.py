@@ -23,6 +23,7 @@ from ..params import (
     OrbitParams,
     ReelParams,
     as_float_tuple,
+    check_count,
     check_lengths,
     check_masses,
     check_range,
@@ -298,14 +299,8 @@ class EnvConfig:
                 hints.append(f"{k!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
             raise ValueError(f"unknown argument(s) {', '.join(hints)}; valid arguments: "
                              f"{', '.join(valid)}")
-        n_bodies = kwargs.get("n_bodies", 3)
-        if isinstance(n_bodies, bool) or not isinstance(n_bodies, (int, np.integer)):
-            raise TypeError(f"n_bodies must be an int, got {type(n_bodies).__name__} "
-                            f"{n_bodies!r}")
-        if not 2 <= n_bodies <= MAX_BODIES:
-            raise ValueError(f"n_bodies={n_bodies!r} must be in [2, {MAX_BODIES}] (one tether "
-                             "or more)")
-        n = int(n_bodies) - 1
+        n = check_count("n_bodies", kwargs.get("n_bodies", 3), 2, MAX_BODIES,
+                        "one tether or more") - 1
         given = dict(kwargs)
         # chain defaults that depend on N
         if given.get("masses") is None:
@@ -327,7 +322,7 @@ class EnvConfig:
             except (TypeError, ValueError) as exc:  # name the gym.make argument
                 raise renamed_error(exc, {attr: flat for flat, attr in names.items()
                                           if attr != flat}) from None
-        config = cls(n_bodies=int(n_bodies), **parts,
+        config = cls(n_bodies=n + 1, **parts,
                      reward_weights=RewardWeights.from_dict(kwargs.get("reward_weights")),
                      cost_thresholds=CostThresholds.from_dict(kwargs.get("cost_thresholds")),
                      render_mode=kwargs.get("render_mode"))

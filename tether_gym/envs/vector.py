@@ -19,6 +19,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ..params import check_count
 from ..physics import TetherChain
 from .batch import ChainBatch, check_options
 from .config import EnvConfig
@@ -40,13 +41,8 @@ twin's rollouts more; more envs at once: several vector envs, or several process
 
 def check_num_envs(num_envs) -> int:
     """``num_envs`` as an int in [1, :data:`MAX_NUM_ENVS`]; TypeError or ValueError else."""
-    if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)):
-        raise TypeError(f"num_envs must be an int, got {type(num_envs).__name__} "
-                        f"{num_envs!r}")
-    if not 1 <= num_envs <= MAX_NUM_ENVS:
-        raise ValueError(f"num_envs={num_envs!r} must be in [1, {MAX_NUM_ENVS}] (one vector "
-                         "env's sub-envs; more at once: several vector envs)")
-    return int(num_envs)
+    return check_count("num_envs", num_envs, 1, MAX_NUM_ENVS,
+                       "one vector env's sub-envs; more at once: several vector envs")
 
 
 def _check_seeds(seed, num_envs: int) -> list[int | None]:
