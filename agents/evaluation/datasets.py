@@ -86,7 +86,9 @@ def check_request(policy: str, episodes: int, seed: int, dataset_id: str) -> Non
             raise TypeError(f"{name} must be an integer, got {value!r}")
         low = 1 if name == "episodes" else 0
         if not low <= value <= high:
-            raise ValueError(f"{name} {value!r} must be in [{low}, {high}]")
+            why = ("" if name == "episodes" else f" (episode k resets with seed + k, and "
+                   f"every env seed stays below 2**31 for up to {MAX_EPISODES} episodes)")
+            raise ValueError(f"{name} {value!r} must be in [{low}, {high}]{why}")
     if not isinstance(dataset_id, str) or not _ID.fullmatch(dataset_id):
         raise ValueError(f"dataset id {dataset_id!r} must look like "
                          f"{DATASET_PREFIX}/<name>-v<K> (letters, digits, _ . / -)")

@@ -67,6 +67,7 @@ from ..files.run_folder import (
     FANOUT_LOG_FILE,
     TRAIN_LOG_FILE,
     checkpoint_steps,
+    earlier_run,
     read_train_info,
     seed_dir,
     trained_steps,
@@ -588,6 +589,11 @@ def run_fanout(options: TrainOptions) -> int:
     out = Path(options.out or Path("runs") / options.algo).absolute()
     if out.exists() and not out.is_dir():
         raise ConfigError(f"--out {out} is a file; --seeds needs a folder for seed_K/ runs")
+    found = earlier_run(out) if out.is_dir() else ""
+    if found:  # one run's folder, not a folder of runs (its --resume is not --seeds')
+        raise ConfigError(f"--out {out} is itself a training run ({found}); --seeds writes "
+                          "one seed_K/ run per seed into a folder of its own: give a new "
+                          "folder, or the one that holds the seed_K/ runs")
     use_ray = seeds > 1 or bool(options.ray_address or os.environ.get("RAY_ADDRESS"))
     if use_ray:
         require_ray()

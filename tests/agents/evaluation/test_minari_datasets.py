@@ -78,6 +78,10 @@ def test_mpc_demonstrations(root, capsys):
 
 @pytest.mark.parametrize("args, message", [
     (["smc", "--episodes", "0"], "episodes 0 must be in [1, 100000]"),
+    # the bound below 2**31 - 1 says why
+    (["smc", "--seed", "-5"], "seed -5 must be in [0, 2147383647] (episode k resets with "
+                              "seed + k, and every env seed stays below 2**31 for up to "
+                              "100000 episodes)"),
     (["nope"], "unknown policy 'nope'"),
     (["smc", "zero", "--dataset-id", "tether_gym/libration/x-v0"],
      "--dataset-id 'tether_gym/libration/x-v0' names one dataset; 2 policies given"),

@@ -178,6 +178,21 @@ def _no_training(settings):
     raise AssertionError(f"trained {settings.out}")
 
 
+def test_a_run_folder_as_out_is_refused_naming_what_to_give(tmp_path, capsys, monkeypatch):
+    """Before: the one-run refusal, whose advice (--resume) --seeds refuses."""
+    monkeypatch.setattr(fanout, "train", _no_training)
+    run = tmp_path / "seed_0"
+    (run / "checkpoints").mkdir(parents=True)
+    (run / "checkpoints" / "model_64_steps.zip").write_bytes(b"")
+    assert main(["--seeds", "2", "--out", str(run)]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"train.py: error: --out {run} is itself a training run "
+                   "(checkpoints/model_64_steps.zip); --seeds writes one seed_K/ run per seed "
+                   "into a folder of its own: give a new folder, or the one that holds the "
+                   "seed_K/ runs\n")
+    assert sorted(p.name for p in run.rglob("*")) == ["checkpoints", "model_64_steps.zip"]
+
+
 def test_without_ray(tmp_path, capsys, monkeypatch, tiny):
     monkeypatch.setitem(sys.modules, "ray", None)  # `import ray` raises ImportError
     monkeypatch.delenv("RAY_ADDRESS", raising=False)
