@@ -37,6 +37,7 @@ from .registry import (
     HANDOVER,
     PolicyKind,
     PolicySpec,
+    check_given_env_kwargs,
     default_policies,
     make_policy,
     resolve_policy,
@@ -293,6 +294,7 @@ def _prepare(settings: list[_Setting], specs: list[PolicySpec], scenarios, env_k
     """
     for spec in specs:
         spec.load()
+        check_given_env_kwargs(spec, env_kwargs)
     base = trained_on(specs, env_kwargs)
     for sc in scenarios:
         try:

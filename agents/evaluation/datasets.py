@@ -39,7 +39,7 @@ import numpy as np
 
 import tether_gym
 
-from .registry import make_policy, resolve_policy
+from .registry import check_given_env_kwargs, make_policy, resolve_policy
 
 __all__ = ["INFO_KEYS", "DATASET_PREFIX", "MAX_EPISODES", "dataset_id_for", "build_dataset",
            "content_checksum", "require_minari", "dataset_path", "check_request"]
@@ -179,7 +179,9 @@ def build_dataset(policy: str, env_kwargs: dict, episodes: int, seed: int = 0,
     spec = resolve_policy(policy)
     spec.load()
     # the policy's own env arguments over the given ones, as evaluate.py does: reel rates
-    # for the baselines, a trained agent's action mode, bodies and reference
+    # for the baselines, a trained agent's action mode, bodies and reference; a given
+    # value they would replace is refused
+    check_given_env_kwargs(spec, env_kwargs)
     kwargs = {**env_kwargs, **spec.env_kwargs}
     env = gym.make(tether_gym.ENV_ID, **kwargs)
     agent_policy = make_policy(policy, env)

@@ -53,7 +53,7 @@ __all__ = ["PolicyKind", "PolicyEntry", "PolicySpec", "AgentForm", "register_pol
            "resolve_policy", "make_policy", "default_policies",
            "shipped_agents", "load_plugins", "BASELINES", "OPT_IN", "HANDOVER",
            "HANDOVER_OF", "FILTERED", "FILTERED_OF", "ENTRY_POINT_GROUP", "ACTION_KEYS",
-           "OBSERVATION_KEYS", "TRAINED_ON_KEYS", "trained_on"]
+           "OBSERVATION_KEYS", "TRAINED_ON_KEYS", "trained_on", "check_given_env_kwargs"]
 
 HANDOVER = "handover:"
 """Prefix of a handover hybrid's policy name: ``handover:`` + a trained agent's name."""
@@ -288,9 +288,24 @@ def load_plugins() -> None:
 # --------------------------------------------------------------------------- #
 # trained agents
 # --------------------------------------------------------------------------- #
+def _env_default(key: str):
+    """The env's default of the ``gym.make`` argument ``key``."""
+    from tether_gym.envs.config import FLAT_NAMES, EnvConfig
+
+    part, attr = FLAT_NAMES[key]
+    return getattr(getattr(EnvConfig.from_kwargs(), part), attr)
+
+
 def _recorded(name: str, agents: list, keys: tuple[str, ...]) -> dict:
-    """The runs' recorded env arguments among ``keys``; they must agree."""
-    recorded = [{k: agent.env_kwargs[k] for k in keys if k in agent.env_kwargs}
+    """The runs' recorded env arguments among ``keys``; they must agree.
+
+    An action or observation argument a run did not record is the env's default, which
+    it was trained with (before, a run of the default increment mode evaluated with
+    ``--env-kwargs action_mode=rate`` ran in the rate mode).
+    """
+    defaults = ACTION_KEYS + OBSERVATION_KEYS
+    recorded = [{k: agent.env_kwargs[k] if k in agent.env_kwargs else _env_default(k)
+                 for k in keys if k in agent.env_kwargs or k in defaults}
                 for agent in agents]
     if any(r != recorded[0] for r in recorded):
         raise ValueError(f"policy {name!r}: its runs were trained with different "
@@ -352,6 +367,21 @@ def _recorded_by_agent(specs: list) -> dict[str, dict]:
         values = _recorded(spec.name, spec.agents, TRAINED_ON_KEYS)
         recorded[spec.name] = {"n_bodies": n_default, **values}
     return recorded
+
+
+def check_given_env_kwargs(spec, given: Mapping) -> None:
+    """Refuse env arguments the user gave that the policy replaces with its own.
+
+    A policy's :attr:`PolicySpec.env_kwargs` (the baselines' reel-rate mode, a trained
+    agent's action mode, gain and observation) win over ``--env-kwargs``; a given value
+    that differs would be dropped without a word, so it is a ValueError naming both.
+    """
+    for key, value in given.items():
+        own = spec.env_kwargs.get(key, value)
+        if own != value:
+            raise ValueError(f"--env-kwargs {key}={value!r}: policy {spec.name!r} runs with "
+                             f"{key}={own!r} (what its actions and observations mean); "
+                             f"leave {key} out of --env-kwargs")
 
 
 def trained_on(specs: list, overrides: Mapping | None = None) -> dict:

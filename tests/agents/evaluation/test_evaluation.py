@@ -310,8 +310,8 @@ def test_handover_names_a_hybrid_of_a_trained_agent():
     assert spec.runs == registry.resolve_policy("ppo").runs
     # reel rates, and the observation its agent was trained on
     assert spec.env_kwargs == {"action_mode": "rate", "observe_params": False}
-    assert registry.resolve_policy("ppo").env_kwargs == {
-        "increment_gain": 0.5, "observe_params": False}
+    assert registry.resolve_policy("ppo").env_kwargs == {  # the default mode made explicit
+        "action_mode": "increment", "increment_gain": 0.5, "observe_params": False}
     assert "handover:ppo" in registry.default_policies()
     with pytest.raises(ValueError, match="acts alone"):
         registry.resolve_policy("handover:smc")

@@ -267,3 +267,35 @@ def test_readme_example_runs_as_shown(capsys):
     shown = [line[2:] for line in code.splitlines() if line.startswith("# ") and ":" in line
              and line[2:].split(":")[0] in ("hold", "smc")]
     assert printed == shown and len(shown) == 2
+
+
+@pytest.mark.parametrize("policy, given, own", [
+    # before: ppo (trained in the default increment mode, which its agent.json does not
+    # record) ran in the rate mode, its increments read as reel rates
+    ("ppo", "action_mode=rate", "action_mode='increment'"),
+    ("ppo", "increment_gain=0.25", "increment_gain=0.5"),
+    ("smc", "action_mode=increment", "action_mode='rate'"),
+    ("distill_ppo", "observe_params=True", "observe_params=False"),
+])
+def test_an_env_argument_a_policy_replaces_is_refused(tmp_path, capsys, policy, given, own):
+    out = tmp_path / "never"
+    assert main([policy, "--suite", "paper", "--seeds", "1", "--env-kwargs", given,
+                 "--out", str(out), "--no-plots"]) == 2
+    err = capsys.readouterr().err
+    key = given.split("=")[0]
+    assert (f"policy {policy!r} runs with {own} (what its actions and observations mean); "
+            f"leave {key} out of --env-kwargs") in err, err
+    assert len(err.strip().splitlines()) == 1 and not out.exists()
+
+
+def test_a_trained_agent_runs_in_the_mode_it_was_trained_in(tmp_path):
+    """An argument its agent.json leaves out is the env's default, made explicit."""
+    spec = registry.resolve_policy("ppo")
+    spec.load()
+    assert spec.env_kwargs["action_mode"] == "increment"
+    assert dict(spec.env_kwargs) == {"action_mode": "increment", "increment_gain": 0.5,
+                                     "observe_params": False}
+    # an argument that agrees with the policy's is taken
+    assert main(["ppo", "--suite", "paper", "--seeds", "1", "--env-kwargs",
+                 "orbits_per_episode=0.2", "action_mode=increment", "--no-plots",
+                 "--out", str(tmp_path / "agree")]) == 0
