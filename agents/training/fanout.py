@@ -327,11 +327,32 @@ LOCAL_ENV = {**TASK_ENV, "RAY_AUTH_MODE": "disabled"}
 
 
 def reaper_folder() -> Path:
-    """Where the local instances' process records are kept (one file per driver)."""
+    """Where the local instances' process records are kept (one file per driver).
+
+    The folder also holds the start-up module every Python process of a local instance
+    imports (:func:`.ray_reaper.fate_env`), and the reaper kills what its records name,
+    so it must be this user's alone: made with mode 0700, and refused (ConfigError) when
+    it exists as anything else, such as a folder another user made in the shared
+    temporary directory, where a planted ``sitecustomize.py`` would run in our processes.
+    """
+    import stat
     import tempfile
 
-    uid = getattr(os, "getuid", lambda: 0)()
-    return Path(tempfile.gettempdir()) / f"tether_gym_ray_{uid}"
+    uid = getattr(os, "getuid", lambda: None)()
+    folder = Path(tempfile.gettempdir()) / f"tether_gym_ray_{uid if uid is not None else 0}"
+    with contextlib.suppress(FileExistsError):
+        folder.mkdir(mode=0o700)
+    if uid is None:  # no owners to check (Windows)
+        return folder
+    info = os.lstat(folder)
+    if (not stat.S_ISDIR(info.st_mode) or info.st_uid != uid
+            or stat.S_IMODE(info.st_mode) & 0o022):
+        raise ConfigError(f"{folder} is not a private folder of this user (a "
+                          f"{'folder' if stat.S_ISDIR(info.st_mode) else 'non-folder'} of "
+                          f"owner uid {info.st_uid}, mode {stat.S_IMODE(info.st_mode):o}): a "
+                          "local Ray instance keeps its process records and start-up module "
+                          "there; remove it, or set TMPDIR to a folder of your own")
+    return folder
 
 
 _WATCHERS: dict[int, object] = {}

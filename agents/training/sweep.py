@@ -66,6 +66,7 @@ from dataclasses import dataclass, replace
 from enum import Enum
 from pathlib import Path
 
+from ..common.jsonio import loads_json
 from ..files.run_folder import (
     FANOUT_LOG_FILE,
     read_evaluations,
@@ -342,11 +343,15 @@ def _trial_config(base: dict, overrides: dict, trial_dir: Path, algo: str, env_i
     trial_dir.mkdir(parents=True, exist_ok=True)
     record = trial_dir / "trial.json"
     wanted = json.dumps({"params": overrides}, sort_keys=True)
-    if record.is_file() and json.dumps(json.loads(record.read_text()),
-                                       sort_keys=True) != wanted:
-        raise ConfigError(f"{trial_dir} was trained with other values "
-                          f"({record.read_text().strip()}, now {wanted}): the sweep file "
-                          f"changed; give a new --out")
+    if record.is_file():
+        try:  # a record cut short or forged: a traceback before (JSONDecodeError)
+            recorded = json.dumps(loads_json(record.read_bytes(), record), sort_keys=True)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"{exc}; the trial record is damaged: remove {trial_dir} to "
+                              "train the trial again, or give a new --out") from None
+        if recorded != wanted:
+            raise ConfigError(f"{trial_dir} was trained with other values ({recorded}, now "
+                              f"{wanted}): the sweep file changed; give a new --out")
     config = trial_dir / "hyperparams.yml"
     write_text_atomic(config, yaml.safe_dump({"default": apply_overrides(base, overrides)},
                                              sort_keys=False))

@@ -140,3 +140,39 @@ def test_local_ray_dies_with_a_killed_driver_and_shows_no_banner(tmp_path):
     proc.wait()
     assert _wait_gone(info["pids"], 20) == []
     assert "Token authentication" not in proc.stderr.read()
+
+
+POSIX = pytest.mark.skipif(not hasattr(os, "getuid"), reason="folder owners are POSIX's")
+
+
+@POSIX
+def test_the_reaper_folder_is_made_private(tmp_path, monkeypatch):
+    monkeypatch.setattr("tempfile.gettempdir", lambda: str(tmp_path))
+    folder = fanout.reaper_folder()
+    assert folder == tmp_path / f"tether_gym_ray_{os.getuid()}"
+    assert folder.is_dir() and folder.stat().st_mode & 0o777 == 0o700
+    assert fanout.reaper_folder() == folder  # an existing private folder is taken
+
+
+@POSIX
+@pytest.mark.parametrize("case", ["world-writable", "another owner", "a symlink"])
+def test_a_reaper_folder_others_can_write_is_refused(tmp_path, monkeypatch, capsys, case):
+    """Before: any folder of that name in the shared temporary directory was taken; its
+    sitecustomize.py goes first on the PYTHONPATH of every Python process of a local Ray
+    instance, and the reaper SIGKILLs what its records name."""
+    monkeypatch.setattr("tempfile.gettempdir", lambda: str(tmp_path))
+    folder = tmp_path / f"tether_gym_ray_{os.getuid()}"
+    if case == "a symlink":
+        (tmp_path / "elsewhere").mkdir(mode=0o700)
+        folder.symlink_to(tmp_path / "elsewhere")
+    else:
+        folder.mkdir()
+        os.chmod(folder, 0o777 if case == "world-writable" else 0o700)
+        if case == "another owner":
+            if os.getuid() != 0:
+                pytest.skip("only root can give a folder to another user")
+            os.chown(folder, 12345, 12345)
+    with pytest.raises(fanout.ConfigError, match=rf"{folder} is not a private folder of "
+                                                 r"this user .*set TMPDIR"):
+        fanout.reaper_folder()
+    assert not (folder / "site").exists()

@@ -218,3 +218,24 @@ def test_trials_are_trained_from_records(tmp_path, capsys, monkeypatch):
         rows = list(csv.DictReader(fh))
     assert [(r["trial"], r["median return"]) for r in rows] == [("trial_001", "2.5"),
                                                                 ("trial_000", "1.5")]
+
+
+@pytest.mark.parametrize("text", ['{"params": {"learning_rate": 0.00', "[" * 100_000])
+def test_a_damaged_trial_record_is_one_line(tmp_path, capsys, monkeypatch, text):
+    """A trial.json cut short (or forged 100k levels deep) was a JSONDecodeError (or
+    RecursionError) traceback before any trial ran; now one line naming the record."""
+    from tether_gym_agents.training import fanout, sweep
+
+    monkeypatch.setattr(fanout, "train", lambda settings: pytest.fail("trained"))
+    monkeypatch.setattr(sweep, "run_jobs", lambda jobs, **kw: pytest.fail("ran jobs"))
+    path = _sweep_file(tmp_path, {"seeds_per_trial": 2, "timesteps": 64,
+                                  "params": {"learning_rate": [1.0e-3]}})
+    out = tmp_path / "sw"
+    (out / "trial_000").mkdir(parents=True)
+    record = out / "trial_000" / "trial.json"
+    record.write_text(text)
+    assert main(["--sweep", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert err.startswith(f"train.py: error: {record} is not valid JSON"), err
+    assert f"the trial record is damaged: remove {out / 'trial_000'}" in err, err
