@@ -89,7 +89,9 @@ def _bench_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser
     parser.add_argument("--env-kwargs", nargs="+", default=[], metavar="KEY=VALUE",
                         help="env arguments applied on top of every scenario (and over "
                              "what trained agents were trained on), as Python literals, e.g. "
-                             "n_bodies=4 eccentricity=0.3 masses=(1,2,3)")
+                             "n_bodies=4 eccentricity=0.3 masses=(1,2,3); not an action or "
+                             "observation argument a policy sets itself (the baselines' "
+                             "reel-rate mode, an agent's action mode, gain and observation)")
     parser.add_argument("--seeds", type=int, default=10, metavar="K", help=SEEDS_HELP)
     parser.add_argument("--seed", type=int, default=0, help="first env seed (default 0)")
     parser.add_argument("--out", default=None,
