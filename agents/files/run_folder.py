@@ -58,7 +58,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import zipfile
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -69,8 +68,9 @@ import numpy as np
 
 from ..common.jsonio import loads_json, to_jsonable
 from ..common.yamlio import MAX_YAML_BYTES, load_yaml_file
-from .folder_paths import FolderFileError, file_inside, folder_inside
+from .folder_paths import FolderFileError, file_inside, folder_inside, size_cap
 from .safe_format import AGENT_FILE
+from .safe_npz import NpzFileError, after_path, read_npz
 
 __all__ = ["CONFIG_FILE", "ARGS_FILE", "COMMAND_FILE", "TRAIN_INFO_FILE", "EVAL_DIR",
            "EVALUATIONS_FILE", "LEARNING_CURVE_FILE", "TB_DIR", "FINAL_AGENT_DIR",
@@ -302,9 +302,10 @@ def read_evaluations(run: Path) -> dict[str, np.ndarray] | None:
     except FolderFileError as exc:
         raise DamagedFileError(str(exc)) from None
     try:
-        with np.load(path, allow_pickle=False) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
+        arrays = read_npz(path, max_bytes=size_cap(path))
+    except NpzFileError as exc:  # its message starts with the path
+        raise DamagedFileError(f"{path}: damaged ({after_path(exc, path)})") from None
+    except OSError as exc:
         raise DamagedFileError(f"{path}: damaged ({type(exc).__name__}: {exc})") from None
     missing = [k for k in _EVAL_KEYS if k not in arrays]
     if missing:

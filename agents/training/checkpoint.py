@@ -30,8 +30,9 @@ import numpy as np
 
 from ..common.jsonio import loads_json
 from ..files.agent_values import check_running_stats
-from ..files.folder_paths import FolderFileError, file_inside
+from ..files.folder_paths import FolderFileError, file_inside, size_cap
 from ..files.run_folder import atomic_target
+from ..files.safe_npz import NpzFileError, after_path, read_npz
 
 __all__ = ["save_stats_npz", "load_stats_npz", "save_buffer_npz", "load_buffer_npz",
            "load_zip_weights", "safe_companion"]
@@ -131,10 +132,11 @@ def _save_npz(path: Path, arrays: dict[str, Any]) -> None:
 
 def _load_npz(path: Path) -> dict[str, np.ndarray]:
     _regular(path)
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            return {k: data[k] for k in data.files}
-    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+    try:  # each array's declared size checked before it is allocated
+        return read_npz(path, max_bytes=size_cap(path))
+    except NpzFileError as exc:  # its message starts with the path
+        raise ValueError(f"{path}: damaged ({after_path(exc, path)})") from None
+    except OSError as exc:
         raise ValueError(f"{path}: damaged ({type(exc).__name__}: {exc})") from None
 
 

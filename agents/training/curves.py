@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +10,7 @@ import numpy as np
 from ..files.run_folder import (
     LEARNING_CURVE_FILE,
     SEED_CURVES_FILE,
+    DamagedFileError,
     atomic_target,
     evaluations_path,
     read_evaluations,
@@ -58,7 +60,8 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     Each seed's mean evaluation return against env steps (thin lines), and the
     interquartile mean over the seeds with its min-max band on the steps every seed
     has reached (evaluations at the same step counts, as the fan-out's runs have).
-    None without matplotlib or without two runs holding ``eval/evaluations.npz``.
+    None without matplotlib or without two runs holding ``eval/evaluations.npz``. A run
+    whose file is damaged is left out, with a line on stderr naming it.
     """
     from scipy.stats import trim_mean
 
@@ -69,7 +72,11 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
         return None
     curves = {}
     for run in seed_runs(folder):
-        data = read_evaluations(run)
+        try:
+            data = read_evaluations(run)
+        except DamagedFileError as exc:  # one damaged seed does not end the plot
+            print(f"learning curves: {run.name} left out: {exc}", file=sys.stderr)
+            continue
         if data is not None:
             curves[run.name] = (data["timesteps"], np.nanmean(data["results"], axis=1))
     if len(curves) < 2:

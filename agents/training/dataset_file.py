@@ -6,9 +6,10 @@ data. :func:`read_dataset_arrays` reads one without trusting it:
 
 - the path must be a regular file of at most :data:`MAX_DATASET_BYTES` (a FIFO is never
   opened, so nothing waits for a writer);
-- no pickle (``allow_pickle=False``), and every array's header is read before its data:
-  the sizes the headers declare must fit in the archive's members and, together, in
-  :data:`MAX_DATASET_BYTES`, so a small file cannot make the reader allocate gigabytes;
+- no pickle, and every array's header is read before its data
+  (:func:`~tether_gym_agents.files.safe_npz.read_npz`): the sizes the headers declare
+  must fit in the archive's members and, together, in :data:`MAX_DATASET_BYTES`, so a
+  small file cannot make the reader allocate gigabytes;
 - every key of :data:`DATA_KEYS` is present, with its shape and kind: ``obs`` (N, d) and
   ``labels`` (N, n) finite reals with N >= 1, the labels in [-1, 1] (the rate-mode
   action range mpc's labels are clipped to); ``iteration``, ``episode`` (N,) integers
@@ -22,13 +23,13 @@ Anything else is one ``ValueError`` naming the file and the key.
 
 from __future__ import annotations
 
-import math
 import os
 import stat
-import zipfile
 from pathlib import Path
 
 import numpy as np
+
+from ..files.safe_npz import read_npz
 
 __all__ = ["DATA_KEYS", "MAX_DATASET_BYTES", "read_dataset_arrays"]
 
@@ -41,10 +42,6 @@ _EPISODE_KEYS = ("episode_env_seed", "episode_eccentricity", "episode_masses",
                  "episode_beta", "episode_mixture_seed")
 DATA_KEYS = _PAIR_KEYS + _EPISODE_KEYS
 """The arrays of a dataset file: per pair, then per episode."""
-
-
-class _Refused(ValueError):
-    """A check of this module failed (its message is final)."""
 
 
 def read_dataset_arrays(path) -> dict[str, np.ndarray]:
@@ -66,41 +63,10 @@ def read_dataset_arrays(path) -> dict[str, np.ndarray]:
                          "read)")
     if info.st_size > MAX_DATASET_BYTES:
         raise ValueError(f"{path} is {info.st_size} bytes; at most {MAX_DATASET_BYTES}")
-    try:
-        with zipfile.ZipFile(path) as archive:
-            arrays = _read_arrays(archive, path)
-    except _Refused:
-        raise
-    except Exception as exc:  # noqa: BLE001 - a hostile archive raises many kinds
-        raise ValueError(f"{path} is not a readable .npz of plain arrays "
-                         f"({type(exc).__name__}: {exc})") from None
+    arrays = read_npz(path, max_bytes=MAX_DATASET_BYTES, required=DATA_KEYS,
+                      what="a dataset file")
     _check_arrays(arrays, path)
     return arrays
-
-
-def _read_arrays(archive: zipfile.ZipFile, path: Path) -> dict[str, np.ndarray]:
-    """Each key's array, its declared size checked against its member before it is read."""
-    names = set(archive.namelist())
-    missing = [k for k in DATA_KEYS if f"{k}.npy" not in names]
-    if missing:
-        raise _Refused(f"{path} holds no {missing[0]!r}; a dataset file holds "
-                       f"{list(DATA_KEYS)}")
-    total = 0
-    for key in DATA_KEYS:
-        member = archive.getinfo(f"{key}.npy")
-        with archive.open(member) as fh:
-            version = np.lib.format.read_magic(fh)
-            read_header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
-                           else np.lib.format.read_array_header_2_0)
-            shape, _, dtype = read_header(fh)
-        declared = math.prod(shape) * dtype.itemsize
-        total += declared
-        if dtype.hasobject or declared > member.file_size or total > MAX_DATASET_BYTES:
-            raise _Refused(f"{path}: {key!r} declares {shape} x {dtype} ({declared} bytes) "
-                           f"in a member of {member.file_size} bytes; allowed: plain "
-                           f"arrays that fit their member, {MAX_DATASET_BYTES} bytes in all")
-    with np.load(path, allow_pickle=False) as z:
-        return {k: z[k] for k in DATA_KEYS}
 
 
 def _check_arrays(a: dict[str, np.ndarray], path: Path) -> None:

@@ -69,6 +69,7 @@ from pathlib import Path
 from ..common.jsonio import loads_json
 from ..files.run_folder import (
     FANOUT_LOG_FILE,
+    DamagedFileError,
     read_evaluations,
     seed_dir,
     write_text_atomic,
@@ -279,10 +280,18 @@ def apply_overrides(params: dict, overrides: dict) -> dict:
 
 
 def final_eval_return(run_dir: Path) -> float:
-    """Mean return of the last evaluation in ``run_dir/eval/evaluations.npz``; NaN if none."""
+    """Mean return of the last evaluation in ``run_dir/eval/evaluations.npz``; NaN if none.
+
+    A damaged file counts as none, with a line on stderr naming it (the ranking of the
+    other trials goes on).
+    """
     import numpy as np
 
-    data = read_evaluations(run_dir)
+    try:
+        data = read_evaluations(run_dir)
+    except DamagedFileError as exc:
+        print(f"{exc}; counted as no return", file=sys.stderr)
+        return float("nan")
     if data is None or data["results"].shape[0] == 0:
         return float("nan")
     return float(np.nanmean(data["results"][-1]))  # rows of shorter evaluations are NaN-padded

@@ -239,3 +239,14 @@ def test_a_damaged_trial_record_is_one_line(tmp_path, capsys, monkeypatch, text)
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert err.startswith(f"train.py: error: {record} is not valid JSON"), err
     assert f"the trial record is damaged: remove {out / 'trial_000'}" in err, err
+
+
+def test_a_damaged_evaluation_file_ranks_as_no_return(tmp_path, capsys):
+    """Before: the DamagedFileError ended the ranking of every trial with a traceback."""
+    run = tmp_path / "seed_0"
+    (run / "eval").mkdir(parents=True)
+    (run / "eval" / "evaluations.npz").write_bytes(b"cut short")
+    assert math.isnan(final_eval_return(run))
+    err = capsys.readouterr().err
+    assert f"{run / 'eval' / 'evaluations.npz'}: damaged" in err
+    assert err.rstrip().endswith("counted as no return")
