@@ -35,7 +35,7 @@ from ..files.run_folder import atomic_target
 from ..files.safe_npz import NpzFileError, after_path, read_npz
 
 __all__ = ["save_stats_npz", "load_stats_npz", "save_buffer_npz", "load_buffer_npz",
-           "load_zip_weights", "safe_companion"]
+           "load_zip_weights", "safe_companion", "check_unpacked_size"]
 
 
 def safe_companion(path: Path) -> Path:
@@ -101,6 +101,7 @@ def load_zip_weights(model, path: Path) -> None:
     try:
         _regular(path)
         with zipfile.ZipFile(path) as zf:
+            check_unpacked_size(zf, path)
             data = loads_json(zf.read("data"), f"{path}: data")
             tensors = {name[: -len(".pth")]: torch.load(io.BytesIO(zf.read(name)),
                                                         map_location="cpu", weights_only=True)
@@ -117,6 +118,19 @@ def load_zip_weights(model, path: Path) -> None:
     except (zipfile.BadZipFile, OSError, EOFError, KeyError, TypeError, RuntimeError,
             ValueError) as exc:
         raise ValueError(f"{path}: {type(exc).__name__}: {exc}") from None
+
+
+def check_unpacked_size(zf: zipfile.ZipFile, path: Path) -> None:
+    """Refuse a zip whose members unpack to more than its kind's size cap (ValueError).
+
+    ``ZipFile.read`` unpacks a whole member into memory, and deflate packs zeros about
+    1000 to 1: a model zip under its 512 MiB cap could unpack to hundreds of GB. The
+    sizes are the archive's own records, which the reader enforces while unpacking.
+    """
+    unpacked = sum(member.file_size for member in zf.infolist())
+    if unpacked > size_cap(path):
+        raise ValueError(f"{path}: its members unpack to {unpacked} bytes, more than the "
+                         f"{size_cap(path)} bytes accepted for a file of its kind")
 
 
 def _regular(path: Path) -> Path:

@@ -54,7 +54,13 @@ from ..files.run_folder import (
     saved_models,
     write_evaluations,
 )
-from .checkpoint import load_buffer_npz, load_stats_npz, load_zip_weights, safe_companion
+from .checkpoint import (
+    check_unpacked_size,
+    load_buffer_npz,
+    load_stats_npz,
+    load_zip_weights,
+    safe_companion,
+)
 from .config import ConfigError
 
 __all__ = ["PICKLE_RESUME_WARNING", "ResumeBuild", "resume_candidates", "load_resume_point",
@@ -102,6 +108,7 @@ def _zip_timesteps(path: Path) -> int | None:
     """``num_timesteps`` from a model zip's plain-JSON ``data`` (nothing is unpickled)."""
     try:
         with zipfile.ZipFile(path) as zf:
+            check_unpacked_size(zf, path)
             return int(loads_json(zf.read("data"), path)["num_timesteps"])
     except (zipfile.BadZipFile, KeyError, ValueError, TypeError, OSError, EOFError):
         return None

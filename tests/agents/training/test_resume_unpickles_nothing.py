@@ -90,3 +90,40 @@ def test_pickled_statistics_need_allow_pickle(tmp_path, capsys):
     printed = capsys.readouterr()
     assert "--allow-pickle: unpickling" in printed.err and "can run any code" in printed.err
     assert f"resuming from {out / 'final_model.zip'} at step 512" in printed.out
+
+
+def _padded_data(path, pad_bytes: int):
+    """Rewrite a model zip with its ``data`` padded by ``pad_bytes`` spaces (valid JSON)."""
+    with zipfile.ZipFile(path) as zf:
+        entries = {name: zf.read(name) for name in zf.namelist()}
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, blob in entries.items():
+            zf.writestr(name, blob + b" " * pad_bytes if name == "data" else blob)
+
+
+def test_a_model_zip_that_unpacks_past_its_cap_is_skipped(tmp_path, capsys, monkeypatch):
+    """Before: ZipFile.read unpacked the whole member: a 2.2 MB final_model.zip whose
+    data unpacks to 2 GiB resumed after 81 s at 4.6 GB peak memory (unpacking to more
+    would run out of memory); now it is refused by the sizes the zip records, and
+    --resume takes the next saved model, as for any damaged one."""
+    from tether_gym_agents.training import checkpoint
+
+    out = tmp_path / "run"
+    argv = ["--out", str(out), *FAST]
+    assert main([*argv, "--timesteps", "512"]) == 0
+    _padded_data(out / "final_model.zip", 4096)
+    monkeypatch.setattr(checkpoint, "size_cap", lambda path: 4096)  # the cap, scaled down
+    capsys.readouterr()
+    with pytest.raises(ValueError, match=r"final_model.zip: its members unpack to \d+ bytes, "
+                                         r"more than the 4096 bytes accepted"):
+        checkpoint.check_unpacked_size(zipfile.ZipFile(out / "final_model.zip"),
+                                       out / "final_model.zip")
+    monkeypatch.undo()
+    monkeypatch.setattr(checkpoint, "size_cap",
+                        lambda path: 4096 if path.name == "final_model.zip" else 1 << 29)
+    assert main([*argv, "--timesteps", "256", "--resume"]) == 0
+    printed = capsys.readouterr()
+    # its steps unread, the final model ranks after the checkpoint of the same step
+    assert f"resuming from {out / 'checkpoints' / 'model_512_steps.zip'}" in printed.out, \
+        printed.out
+    assert rf.trained_steps(out) > 512
