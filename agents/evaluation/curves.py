@@ -43,7 +43,7 @@ import numpy as np
 
 from ..common.jsonio import loads_json
 from ..files.folder_paths import copy_files_checked, file_inside
-from ..files.run_folder import checkpoint_agents, seed_runs
+from ..files.run_folder import atomic_target, checkpoint_agents, seed_runs, write_text_atomic
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
 from .benchmark import MAX_SEEDS, EvalOptions, evaluate
 from .registry import FILTERED, resolve_policy
@@ -359,11 +359,12 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
     from ..common.jsonio import to_jsonable
 
     paths = [out / CURVES_FILE, out / "curves.md"]
-    paths[0].write_text(json.dumps(to_jsonable(all_curves), indent=1, allow_nan=False) + "\n")
+    write_text_atomic(paths[0], json.dumps(to_jsonable(all_curves), indent=1,
+                                          allow_nan=False) + "\n")
     tables = [markdown(c) for c in all_curves]
     if len(all_curves) > 1:
         tables.insert(0, summary_markdown(all_curves))
-    paths[1].write_text("\n\n".join(tables) + "\n")
+    write_text_atomic(paths[1], "\n\n".join(tables) + "\n")
     try:
         from matplotlib.backends.backend_agg import FigureCanvasAgg
         from matplotlib.figure import Figure
@@ -403,5 +404,6 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
     fig.suptitle(f"Learning curves on suite {all_curves[0]['suite'] if all_curves else ''!r}"
                  " (checkpoints evaluated afterwards; dashed: the threshold)", fontsize=10)
     paths.append(out / "curves.png")
-    fig.savefig(paths[-1], dpi=100)
+    with atomic_target(paths[-1]) as tmp:
+        fig.savefig(tmp, dpi=100)
     return paths

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..files.run_folder import atomic_target
 from .results import TABLE_COLUMNS
 
 __all__ = ["plot_results", "profile_curve", "cost_points", "PLOT_PIP"]
@@ -103,7 +104,8 @@ def _profile(Figure, Canvas, results: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     path = out / "profile.png"
-    fig.savefig(path, dpi=100)
+    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
+        fig.savefig(tmp, dpi=100)
     return path
 
 
@@ -156,7 +158,8 @@ def _cost(Figure, Canvas, results: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     path = out / "cost.png"
-    fig.savefig(path, dpi=100)
+    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
+        fig.savefig(tmp, dpi=100)
     return path
 
 
@@ -187,7 +190,8 @@ def _trajectories(Figure, Canvas, trajectories: dict, scenario, out: Path) -> Pa
     ax_len.set_ylabel("l1 + ... + l_n [-]")
     ax_len.set_xlabel("true anomaly [orbits]")
     path = out / "trajectories.png"
-    fig.savefig(path, dpi=100)
+    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
+        fig.savefig(tmp, dpi=100)
     return path
 
 
@@ -236,5 +240,6 @@ def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
                  f"(suite {results['suite']!r}; intervals need 2+ runs; n/a: undefined)",
                  fontsize=10)
     path = out / "metrics.png"
-    fig.savefig(path, dpi=100)
+    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
+        fig.savefig(tmp, dpi=100)
     return path

@@ -34,6 +34,7 @@ from importlib import metadata
 from pathlib import Path
 
 from ..common.jsonio import sha256_file, to_jsonable
+from ..files.run_folder import write_text_atomic
 from .metrics import COST_LIMIT, FAILURES, HIGHER_IS_BETTER, METRICS
 from .stats import (
     BOOTSTRAP_SEED,
@@ -265,7 +266,7 @@ def build_results(specs, settings, seeds: list[int], episodes: list[dict], env_k
 def write_results(results: dict, path: Path) -> None:
     """Write ``results`` as strict JSON (no NaN tokens) to ``path``."""
     text = json.dumps(to_jsonable(results), indent=1, allow_nan=False)
-    Path(path).write_text(text + "\n")
+    write_text_atomic(Path(path), text + "\n")  # never through a link or FIFO there
 
 
 def _num(x) -> str:

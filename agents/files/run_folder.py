@@ -58,6 +58,7 @@ from __future__ import annotations
 import json
 import os
 import re
+import secrets
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -127,23 +128,31 @@ class DamagedFileError(ValueError):
 
 
 def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file and ``os.replace``."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    """Write ``text`` to ``path`` through a new temporary file and ``os.replace``."""
+    with atomic_target(path) as tmp:
+        tmp.write_text(text)
 
 
 @contextmanager
 def atomic_target(path: Path) -> Iterator[Path]:
     """A temporary path to write ``path``'s content to; renamed onto ``path`` on success.
 
-    The temporary name is hidden (``.tmp-<pid>-<name>``, same folder, same suffix, so
-    writers that add a suffix leave it alone and the checkpoint globs do not see it);
-    it is removed when the write fails.
+    The temporary name is hidden (``.tmp-<pid>-<random>-<name>``, same folder, same
+    suffix, so writers that add a suffix leave it alone and the checkpoint globs do not
+    see it); it is removed when the write fails. The file is created new (``O_EXCL``:
+    never a link or FIFO someone put there), and the rename replaces whatever was at
+    ``path`` (a symlink or FIFO included) instead of writing through it: before, a
+    ``results.json`` symlinked to a file outside ``--out`` had that file overwritten, and
+    a FIFO of that name made ``evaluate.py`` wait for ever.
     """
     path = Path(path)
-    tmp = path.with_name(f".tmp-{os.getpid()}-{path.name}")
+    while True:
+        tmp = path.with_name(f".tmp-{os.getpid()}-{secrets.token_hex(4)}-{path.name}")
+        try:
+            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
+            break
+        except FileExistsError:
+            continue
     try:
         yield tmp
         os.replace(tmp, path)
@@ -492,13 +501,21 @@ def check_writable_folder(out: Path, written: Sequence[str]) -> None:
     if out.exists() and not out.is_dir():
         raise FolderFileError("is a file; give a folder (new or a run folder)")
     for name in written:
-        if (out / name).is_dir():
-            raise FolderFileError(f"{out / name} is a folder; the run writes a file there "
-                                  "(remove or rename it)")
+        target = out / name
+        if target.is_symlink():  # a write through it would land outside the folder
+            kind = f"a symlink (to {os.readlink(target)})"
+        elif target.is_dir():
+            kind = "a folder"
+        elif target.exists() and not target.is_file():
+            kind = "not a regular file (a FIFO, device or socket)"
+        else:
+            continue
+        raise FolderFileError(f"{target} is {kind}; the run writes a file there (remove or "
+                              "rename it)")
     try:
         out.mkdir(parents=True, exist_ok=True)
-        probe = out / ".write_test"
-        probe.write_text("")
+        probe = out / f".write_test-{os.getpid()}-{secrets.token_hex(4)}"
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))  # a new file
         probe.unlink()
     except OSError as exc:
         raise FolderFileError(f"cannot write there ({exc.strerror or exc})") from None

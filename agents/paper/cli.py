@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from ..common.jsonio import to_jsonable
+from ..files.run_folder import write_text_atomic
 from .figures import FigureInputs, draw, figure_class
 from .settings import DEFAULT_SMC_SETTINGS, PAPER_SMC_SETTINGS
 from .studies import (
@@ -116,9 +117,9 @@ def reproduce(out_dir, orbits: float | None = None, quick: bool = False, log=pri
     res["runtime_s"] = time.perf_counter() - t0
     rows = build_rows(res)
     res["table"] = rows
-    (out / "paper_vs_tether_gym.md").write_text(markdown(res, rows))
-    (out / "paper_vs_tether_gym.json").write_text(json.dumps(to_jsonable(res), indent=1,
-                                                             allow_nan=False))
+    write_text_atomic(out / "paper_vs_tether_gym.md", markdown(res, rows))
+    write_text_atomic(out / "paper_vs_tether_gym.json",
+                      json.dumps(to_jsonable(res), indent=1, allow_nan=False))
     res["files"] = res["figures"] + ["paper_vs_tether_gym.md", "paper_vs_tether_gym.json"]
     log(f"wrote {len(res['files'])} files to {out} in {res['runtime_s']:.1f} s")
     return res

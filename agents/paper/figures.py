@@ -7,6 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ..files.run_folder import atomic_target
 from .runs import Trajectory
 from .settings import PLOT_EXTRA, TABLE1_LENGTH
 
@@ -59,7 +60,8 @@ def figure_class():
 def _save(fig, out_dir: Path, name: str, written: list) -> None:
     fig.tight_layout()
     path = out_dir / name
-    fig.savefig(path, dpi=110)
+    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
+        fig.savefig(tmp, dpi=110)
     written.append(path.name)
 
 

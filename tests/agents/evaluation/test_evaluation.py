@@ -338,3 +338,34 @@ def test_an_agent_is_evaluated_with_the_observation_it_was_trained_on(tmp_path):
                               env_kwargs=SHORT_KWARGS)
     for name in (str(run), "handover:" + str(run)):
         assert res["policies"][name]["n_episodes"] == 1
+
+
+def test_outputs_replace_a_link_or_fifo_in_out_instead_of_writing_through(tmp_path, capsys):
+    """Before: a results.json symlinked to a file outside --out had that file overwritten
+    with the results, and a FIFO named results.json made evaluate.py wait for ever (seen:
+    killed by a 60 s timeout)."""
+    import os
+    import threading
+
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "results.json").symlink_to(precious)
+    (out / "profile.png").symlink_to(precious)
+    os.mkfifo(out / "metrics.png")
+    done = threading.Event()
+
+    def run():
+        assert main(["smc", "--suite", "paper", "--seeds", "1", "--env-kwargs",
+                     "orbits_per_episode=0.05", "--out", str(out)]) == 0
+        done.set()
+
+    worker = threading.Thread(target=run, daemon=True)  # a blocked write must not hang
+    worker.start()
+    worker.join(120)
+    assert done.is_set(), "evaluate.py did not finish (blocked on a FIFO?)"
+    assert precious.read_text() == "keep"
+    for name in ("results.json", "profile.png", "metrics.png"):
+        assert (out / name).is_file() and not (out / name).is_symlink(), name
+    assert json.loads((out / "results.json").read_text())["suite"] == "paper"

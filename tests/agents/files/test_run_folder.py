@@ -125,3 +125,37 @@ def test_check_writable_folder(tmp_path):
     (tmp_path / "c" / "train_info.json").mkdir(parents=True)
     with pytest.raises(rf.FolderFileError, match="train_info.json is a folder"):
         rf.check_writable_folder(tmp_path / "c", ["config.yml", "train_info.json"])
+
+
+@pytest.mark.parametrize("kind", ["symlink", "fifo"])
+def test_a_link_or_fifo_at_a_written_name_is_refused(tmp_path, kind):
+    """Before: a symlinked command.txt was a FolderFileError traceback after the run had
+    written config.yml and args.yml; a FIFO in a written file's place would block."""
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    out = tmp_path / "run"
+    out.mkdir()
+    if kind == "symlink":
+        (out / "config.yml").symlink_to(precious)
+        what = f"a symlink \\(to {precious}\\)"
+    else:
+        os.mkfifo(out / "config.yml")
+        what = r"not a regular file \(a FIFO, device or socket\)"
+    with pytest.raises(rf.FolderFileError, match=f"config.yml is {what}; the run writes"):
+        rf.check_writable_folder(out, ["train_info.json", "config.yml"])
+    assert precious.read_text() == "keep"
+
+
+def test_atomic_writes_replace_a_link_instead_of_writing_through_it(tmp_path):
+    """Before: write_text_atomic wrote through a planted NAME.tmp symlink, and the
+    folder check's .write_test probe through a planted link of that name."""
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    for name in ("results.json", "results.json.tmp", ".write_test"):
+        (tmp_path / name).symlink_to(precious)
+    rf.write_text_atomic(tmp_path / "results.json", "{}\n")
+    rf.check_writable_folder(tmp_path, [])
+    assert precious.read_text() == "keep"
+    assert (tmp_path / "results.json").read_text() == "{}\n"
+    assert not (tmp_path / "results.json").is_symlink()
+    assert not list(tmp_path.glob(".tmp-*"))
