@@ -41,9 +41,10 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.atomic_write import atomic_target, write_text_atomic
 from ..common.jsonio import loads_json
 from ..files.folder_paths import copy_files_checked, file_inside
-from ..files.run_folder import atomic_target, checkpoint_agents, seed_runs, write_text_atomic
+from ..files.run_folder import checkpoint_agents, seed_runs
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE
 from .benchmark import MAX_SEEDS, EvalOptions, evaluate
 from .registry import FILTERED, resolve_policy

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..files.run_folder import atomic_target
+from ..common.atomic_write import atomic_target
 from .results import TABLE_COLUMNS
 
 __all__ = ["plot_results", "profile_curve", "cost_points", "PLOT_PIP"]

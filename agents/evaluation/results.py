@@ -33,8 +33,8 @@ import subprocess
 from importlib import metadata
 from pathlib import Path
 
+from ..common.atomic_write import write_text_atomic
 from ..common.jsonio import sha256_file, to_jsonable
-from ..files.run_folder import write_text_atomic
 from .metrics import COST_LIMIT, FAILURES, HIGHER_IS_BETTER, METRICS
 from .stats import (
     BOOTSTRAP_SEED,

@@ -59,14 +59,14 @@ import json
 import os
 import re
 import secrets
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..common.atomic_write import atomic_target, write_text_atomic
 from ..common.jsonio import loads_json, to_jsonable
 from ..common.yamlio import MAX_YAML_BYTES, load_yaml_file
 from .folder_paths import FolderFileError, file_inside, folder_inside, size_cap
@@ -125,39 +125,6 @@ _STEPS_IN_NAME = re.compile(r"_(\d+)_steps")
 
 class DamagedFileError(ValueError):
     """A run file that exists but cannot be read (cut short, or not what it should hold)."""
-
-
-def write_text_atomic(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` through a new temporary file and ``os.replace``."""
-    with atomic_target(path) as tmp:
-        tmp.write_text(text)
-
-
-@contextmanager
-def atomic_target(path: Path) -> Iterator[Path]:
-    """A temporary path to write ``path``'s content to; renamed onto ``path`` on success.
-
-    The temporary name is hidden (``.tmp-<pid>-<random>-<name>``, same folder, same
-    suffix, so writers that add a suffix leave it alone and the checkpoint globs do not
-    see it); it is removed when the write fails. The file is created new (``O_EXCL``:
-    never a link or FIFO someone put there), and the rename replaces whatever was at
-    ``path`` (a symlink or FIFO included) instead of writing through it: before, a
-    ``results.json`` symlinked to a file outside ``--out`` had that file overwritten, and
-    a FIFO of that name made ``evaluate.py`` wait for ever.
-    """
-    path = Path(path)
-    while True:
-        tmp = path.with_name(f".tmp-{os.getpid()}-{secrets.token_hex(4)}-{path.name}")
-        try:
-            os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-            break
-        except FileExistsError:
-            continue
-    try:
-        yield tmp
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def last_write_time(run: Path) -> float:
@@ -501,17 +468,9 @@ def check_writable_folder(out: Path, written: Sequence[str]) -> None:
     if out.exists() and not out.is_dir():
         raise FolderFileError("is a file; give a folder (new or a run folder)")
     for name in written:
-        target = out / name
-        if target.is_symlink():  # a write through it would land outside the folder
-            kind = f"a symlink (to {os.readlink(target)})"
-        elif target.is_dir():
-            kind = "a folder"
-        elif target.exists() and not target.is_file():
-            kind = "not a regular file (a FIFO, device or socket)"
-        else:
-            continue
-        raise FolderFileError(f"{target} is {kind}; the run writes a file there (remove or "
-                              "rename it)")
+        if (out / name).is_dir():
+            raise FolderFileError(f"{out / name} is a folder; the run writes a file there "
+                                  "(remove or rename it)")
     try:
         out.mkdir(parents=True, exist_ok=True)
         probe = out / f".write_test-{os.getpid()}-{secrets.token_hex(4)}"
@@ -552,9 +511,11 @@ def earlier_run(run: Path) -> str:
 def check_fresh_run_folder(run: Path, written: Sequence[str], instead: str) -> None:
     """Refuse ``run`` as the folder of a new training run (not a resumed one).
 
-    It must be writable (:func:`check_writable_folder`, which makes it) and hold no
-    earlier run's checkpoints or final model (:func:`earlier_run`). A refused folder
-    keeps its files.
+    It must be writable (:func:`check_writable_folder`, which makes it), hold at each
+    ``written`` name nothing but a regular file inside it (a symlink leading out or a
+    FIFO there is refused: before, a symlinked ``command.txt`` was a traceback after
+    ``config.yml`` was written), and hold no earlier run's checkpoints or final model
+    (:func:`earlier_run`). A refused folder keeps its files.
 
     Parameters
     ----------
@@ -571,6 +532,14 @@ def check_fresh_run_folder(run: Path, written: Sequence[str], instead: str) -> N
         Naming what is wrong; the caller puts its flag in front.
     """
     check_writable_folder(run, written)
+    for name in written:  # (a resumed run's files are checked by its resume)
+        target = Path(run) / name
+        if target.is_symlink() or target.exists():
+            try:  # a link out, a FIFO: a write or append through it lands outside or blocks
+                file_inside(run, target)
+            except FolderFileError as exc:
+                raise FolderFileError(f"{exc}; the run writes a file there (remove or "
+                                      "rename it)") from None
     found = earlier_run(run)
     if found:
         raise FolderFileError(f"already holds an earlier training run ({found}), whose "

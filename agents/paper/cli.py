@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.atomic_write import write_text_atomic
 from ..common.jsonio import to_jsonable
-from ..files.run_folder import write_text_atomic
 from .figures import FigureInputs, draw, figure_class
 from .settings import DEFAULT_SMC_SETTINGS, PAPER_SMC_SETTINGS
 from .studies import (

@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..files.run_folder import atomic_target
+from ..common.atomic_write import atomic_target
 from .runs import Trajectory
 from .settings import PLOT_EXTRA, TABLE1_LENGTH
 

@@ -137,13 +137,18 @@ def test_a_link_or_fifo_at_a_written_name_is_refused(tmp_path, kind):
     out.mkdir()
     if kind == "symlink":
         (out / "config.yml").symlink_to(precious)
-        what = f"a symlink \\(to {precious}\\)"
+        what = f"leads outside {out} \\(to {precious}\\);"
     else:
         os.mkfifo(out / "config.yml")
-        what = r"not a regular file \(a FIFO, device or socket\)"
-    with pytest.raises(rf.FolderFileError, match=f"config.yml is {what}; the run writes"):
-        rf.check_writable_folder(out, ["train_info.json", "config.yml"])
+        what = "is not a regular file;"
+    with pytest.raises(rf.FolderFileError, match=f"config.yml {what}.*the run writes a file "
+                                                 "there"):
+        rf.check_fresh_run_folder(out, ["train_info.json", "config.yml"], "give another")
     assert precious.read_text() == "keep"
+    (out / "config.yml").unlink()
+    (out / "config.yml").symlink_to(out / "elsewhere.yml")  # a link inside the folder
+    (out / "elsewhere.yml").write_text("a: 1\n")
+    rf.check_fresh_run_folder(out, ["train_info.json", "config.yml"], "give another")
 
 
 def test_atomic_writes_replace_a_link_instead_of_writing_through_it(tmp_path):
