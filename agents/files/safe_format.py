@@ -50,6 +50,7 @@ from pathlib import Path
 import numpy as np
 
 from ..common.algorithms import ALGORITHMS, ALGOS, Algorithm, algorithm
+from ..common.atomic_write import atomic_target, write_text_atomic
 from ..common.features import FeatureSpec
 from ..common.jsonio import sha256_file, to_jsonable
 from ..hybrids.residual_spec import ResidualSpec
@@ -222,9 +223,7 @@ def save_agent(path, policy, algo: str, norm: ObsNormalization | None = None,
         "versions": _versions(),
     }
     text = json.dumps(meta, indent=1, allow_nan=False)
-    tmp = path / (AGENT_FILE + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path / AGENT_FILE)
+    write_text_atomic(path / AGENT_FILE, text)
     # safetensors writes its file owner-only; give it the permissions of agent.json
     weights.chmod((path / AGENT_FILE).stat().st_mode & 0o777)
     return path
@@ -235,9 +234,9 @@ def _write_weights(path: Path, policy, row: Algorithm) -> Path:
     module = policy if row.weights == "policy" else getattr(policy, row.weights)
     state = {k: v.detach().cpu().clone() for k, v in module.state_dict().items()}
     weights = path / WEIGHTS_FILE
-    tmp = path / (WEIGHTS_FILE + ".tmp")
-    _safetensors().save_file(state, str(tmp), metadata={"format": FORMAT, "algo": row.name})
-    tmp.replace(weights)
+    with atomic_target(weights) as tmp:
+        _safetensors().save_file(state, str(tmp), metadata={"format": FORMAT,
+                                                            "algo": row.name})
     return weights
 
 

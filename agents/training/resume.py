@@ -37,6 +37,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..common.algorithms import algorithm
+from ..common.atomic_write import atomic_target
 from ..common.jsonio import loads_json
 from ..files.folder_paths import FolderFileError, file_inside
 from ..files.run_folder import (
@@ -317,11 +318,9 @@ def truncate_tensorboard(tb_dir: Path, last_step: int) -> int:
         if len(keep) == len(events):
             continue
         removed += len(events) - len(keep)
-        tmp = path.with_name(path.name + ".tmp")
-        with open(tmp, "wb") as fh:
+        with atomic_target(path) as tmp, open(tmp, "wb") as fh:
             writer = RecordWriter(fh)
             for event in keep:
                 writer.write(event.SerializeToString())
             writer.flush()
-        tmp.replace(path)
     return removed

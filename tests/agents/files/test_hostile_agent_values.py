@@ -218,3 +218,24 @@ def test_bad_policy_kwargs_name_the_agent_file(unit, tmp_path, capsys, kwargs, m
     assert evaluate_main([str(run), "--suite", "paper", "--seeds", "1", "--no-plots",
                           "--out", str(tmp_path / "ev")]) == 2
     assert f"{run / AGENT_FILE}: " in capsys.readouterr().err
+
+
+def test_saving_replaces_links_planted_at_its_temporary_names(tmp_path):
+    """Before: save_agent wrote agent.json.tmp and policy.safetensors.tmp at fixed names,
+    through any symlink planted there (the file it led to was overwritten)."""
+    from stable_baselines3 import PPO
+
+    env = gym.make(tether_gym.ENV_ID, orbits_per_episode=0.05)
+    model = PPO("MlpPolicy", env, n_steps=64, seed=0, device="cpu",
+                policy_kwargs={"net_arch": [8, 8]})
+    precious = tmp_path / "precious.txt"
+    precious.write_text("keep")
+    folder = tmp_path / "agent"
+    folder.mkdir()
+    for name in (AGENT_FILE + ".tmp", WEIGHTS_FILE + ".tmp", AGENT_FILE, WEIGHTS_FILE):
+        (folder / name).symlink_to(precious)
+    save_agent(folder, model.policy, "ppo", None, env_id=tether_gym.ENV_ID, env_kwargs={})
+    assert precious.read_text() == "keep"
+    assert not (folder / AGENT_FILE).is_symlink() and not (folder / WEIGHTS_FILE).is_symlink()
+    agent = TrainedAgent.load(folder)
+    assert np.isfinite(agent.predict(np.zeros(agent.observation_space.shape))[0]).all()
