@@ -43,7 +43,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from .envs.config import MIN_STEP, env_config
+from .envs.config import MAX_CONTROL_STEP, MIN_STEP, env_config
 from .params import as_float_tuple, check_range
 from .physics import kernels
 from .physics.layout import at
@@ -66,9 +66,9 @@ stage, so its cost grows about 3.3x per tether: a filtered step of a rate-mode e
 measured 0.028 s at n_bodies = 6, 0.34 s at 8, 1.2-1.5 s at 9 and 4.4 s at 10 (one core,
 2026-12-08); at 12 one step outlasted a minute, and at 20 the 3^19 directions alone
 would take about 240 GB (built under a 4 GB limit: a MemoryError after 11 s)."""
-MAX_SUBSTEPS = round(1.0 / MIN_STEP)
-"""Most RK4 substeps per prediction: the env's most (control_step <= 1 over physics_step
->= MIN_STEP, :mod:`tether_gym.envs.config`)."""
+MAX_SUBSTEPS = round(MAX_CONTROL_STEP / MIN_STEP)
+"""Most RK4 substeps per prediction: the env's most (the largest control step over the
+smallest physics step, :mod:`tether_gym.envs.config`)."""
 
 
 class FilterResult(NamedTuple):
@@ -166,8 +166,8 @@ class SafetyFilter:
         self.substeps = _count("substeps", substeps)
         if self.substeps > MAX_SUBSTEPS:
             raise ValueError(f"substeps={substeps!r} must be at most {MAX_SUBSTEPS} (the "
-                             "env's most: control_step <= 1 over physics_step >= "
-                             f"{MIN_STEP:g})")
+                             f"env's most: control_step <= {MAX_CONTROL_STEP:g} over "
+                             f"physics_step >= {MIN_STEP:g})")
         lo, hi = as_float_tuple("length_bounds", length_bounds, 2)
         if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo < hi):
             raise ValueError(f"length_bounds={length_bounds!r} must be finite with "

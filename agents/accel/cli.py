@@ -31,8 +31,6 @@ DEFAULT_CONFIG = Path(__file__).resolve().parents[1] / "configs" / "gpu_ppo.yml"
 MAX_CONFIG_BYTES = MAX_YAML_BYTES
 """A config file larger than this [bytes] is refused before it is parsed."""
 MAX_SEEDS = 64
-MAX_ENVS = MAX_NUM_ENVS
-"""Envs per process (seeds x n_envs) at most: one vector env's cap, 4M rows."""
 MAX_ROLLOUT_BYTES = 1 << 35
 """What one iteration's samples may keep at their peak [bytes], 32 GiB
 (:func:`rollout_bytes`). Checked before any work, so that a config asking for more than
@@ -95,7 +93,7 @@ def _check_number(path, key, value, low, high, integer=False):
 
 
 _BOUNDS = {  # key: (low, high, integer)
-    "n_envs": (1, MAX_ENVS, True), "n_steps": (1, 4096, True),
+    "n_envs": (1, MAX_NUM_ENVS, True), "n_steps": (1, 4096, True),
     "batch_size": (1, 1 << 24, True), "n_epochs": (1, 100, True),
     "gamma": (0.0, 1.0, False), "gae_lambda": (0.0, 1.0, False),
     "learning_rate": (1e-8, 1.0, False), "clip_range": (1e-4, 10.0, False),
@@ -236,10 +234,10 @@ def main(argv=None, clock_start: float | None = None) -> int:
             steps = _check_number("--timesteps", "value", args.timesteps, 1, 1e10, True)
         if args.n_envs is not None:
             settings = replace(settings, n_envs=_check_number("--n-envs", "value",
-                                                              args.n_envs, 1, MAX_ENVS, True))
-        if settings.n_envs * args.seeds > MAX_ENVS:
+                                                              args.n_envs, 1, MAX_NUM_ENVS, True))
+        if settings.n_envs * args.seeds > MAX_NUM_ENVS:  # the seeds share one vector env
             raise GpuConfigError(f"n_envs x seeds = {settings.n_envs * args.seeds} must be "
-                                 f"<= {MAX_ENVS}")
+                                 f"<= {MAX_NUM_ENVS}")
         try:
             config = EnvConfig.from_kwargs(**env_kwargs)
         except (TypeError, ValueError) as exc:  # TypeError: a value of the wrong type

@@ -36,6 +36,7 @@ from ..files.run_folder import (
     check_writable_folder,
     seed_dir,
     write_config,
+    write_text_atomic,
     write_train_info,
 )
 from ..files.safe_format import AGENT_FILE, WEIGHTS_FILE, ObsNormalization, save_agent
@@ -257,7 +258,7 @@ def train_seeds(settings: PPOSettings, run: GpuRun, log=print) -> dict:
                                "num_timesteps": steps, "wall_time_s": round(wall, 1),
                                "final_training_distribution": {
                                    k: v[s] for k, v in final.items()}})
-        (folder / ITERATION_LOG_FILE).write_text(json.dumps(
+        write_text_atomic(folder / ITERATION_LOG_FILE, json.dumps(
             [{**h, "episodes": h["episodes"][s], "failed": h["failed"][s],
               "mean_return": h["mean_return"][s]} for h in history], indent=1))
     return {"steps_per_seed": steps, "seeds": S, "wall_time_s": wall,

@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_target", "write_text_atomic"]
+__all__ = ["atomic_target", "write_text_atomic", "save_figure", "new_temporary_file"]
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -26,22 +26,39 @@ def write_text_atomic(path: Path, text: str) -> None:
         tmp.write_text(text)
 
 
-@contextmanager
-def atomic_target(path: Path) -> Iterator[Path]:
-    """A temporary path to write ``path``'s content to; renamed onto ``path`` on success.
+def save_figure(fig, path: Path, **savefig_kwargs) -> Path:
+    """``fig.savefig`` onto ``path`` through :func:`atomic_target`; returns ``path``."""
+    with atomic_target(path) as tmp:
+        fig.savefig(tmp, **savefig_kwargs)
+    return Path(path)
 
-    The temporary name is hidden (``.tmp-<pid>-<random>-<name>``, same folder, same
-    suffix, so writers that add a suffix leave it alone and the checkpoint globs do not
-    see it); it is removed when the write fails (see the module docstring).
+
+def new_temporary_file(path: Path) -> Path:
+    """A new empty file beside ``path``: ``.tmp-<pid>-<random>-<name>``, made ``O_EXCL``.
+
+    The name is hidden and keeps ``path``'s suffix (writers that add a suffix leave it
+    alone, and the checkpoint globs do not see it). ``O_EXCL`` makes it a new regular
+    file, never a link or FIFO someone put at that name.
     """
     path = Path(path)
     while True:
         tmp = path.with_name(f".tmp-{os.getpid()}-{secrets.token_hex(4)}-{path.name}")
         try:
             os.close(os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666))
-            break
+            return tmp
         except FileExistsError:
             continue
+
+
+@contextmanager
+def atomic_target(path: Path) -> Iterator[Path]:
+    """A temporary path to write ``path``'s content to; renamed onto ``path`` on success.
+
+    The temporary file is :func:`new_temporary_file`'s; it is removed when the write
+    fails (see the module docstring).
+    """
+    path = Path(path)
+    tmp = new_temporary_file(path)
     try:
         yield tmp
         os.replace(tmp, path)

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..common.atomic_write import atomic_target, write_text_atomic
+from ..common.atomic_write import save_figure, write_text_atomic
 from ..common.jsonio import loads_json
 from ..files.folder_paths import copy_files_checked, file_inside
 from ..files.run_folder import checkpoint_agents, seed_runs
@@ -405,6 +405,5 @@ def write_curves(all_curves: list[dict], out: Path, log=print) -> list[Path]:
     fig.suptitle(f"Learning curves on suite {all_curves[0]['suite'] if all_curves else ''!r}"
                  " (checkpoints evaluated afterwards; dashed: the threshold)", fontsize=10)
     paths.append(out / "curves.png")
-    with atomic_target(paths[-1]) as tmp:
-        fig.savefig(tmp, dpi=100)
+    save_figure(fig, paths[-1], dpi=100)
     return paths

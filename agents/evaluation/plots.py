@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..common.atomic_write import atomic_target
+from ..common.atomic_write import save_figure
 from .results import TABLE_COLUMNS
 
 __all__ = ["plot_results", "profile_curve", "cost_points", "PLOT_PIP"]
@@ -104,8 +104,7 @@ def _profile(Figure, Canvas, results: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     path = out / "profile.png"
-    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
-        fig.savefig(tmp, dpi=100)
+    save_figure(fig, path, dpi=100)  # a link or FIFO there is replaced, not written to
     return path
 
 
@@ -158,8 +157,7 @@ def _cost(Figure, Canvas, results: dict, out: Path) -> Path:
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
     path = out / "cost.png"
-    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
-        fig.savefig(tmp, dpi=100)
+    save_figure(fig, path, dpi=100)  # a link or FIFO there is replaced, not written to
     return path
 
 
@@ -190,8 +188,7 @@ def _trajectories(Figure, Canvas, trajectories: dict, scenario, out: Path) -> Pa
     ax_len.set_ylabel("l1 + ... + l_n [-]")
     ax_len.set_xlabel("true anomaly [orbits]")
     path = out / "trajectories.png"
-    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
-        fig.savefig(tmp, dpi=100)
+    save_figure(fig, path, dpi=100)  # a link or FIFO there is replaced, not written to
     return path
 
 
@@ -240,6 +237,5 @@ def _intervals(Figure, Canvas, results: dict, out: Path) -> Path:
                  f"(suite {results['suite']!r}; intervals need 2+ runs; n/a: undefined)",
                  fontsize=10)
     path = out / "metrics.png"
-    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
-        fig.savefig(tmp, dpi=100)
+    save_figure(fig, path, dpi=100)  # a link or FIFO there is replaced, not written to
     return path

@@ -34,6 +34,7 @@ like ``smc`` and ``smc_filtered``, design on the scenario's nominal model
 from __future__ import annotations
 
 import difflib
+import functools
 import re
 import warnings
 from collections.abc import Callable, Mapping
@@ -288,6 +289,7 @@ def load_plugins() -> None:
 # --------------------------------------------------------------------------- #
 # trained agents
 # --------------------------------------------------------------------------- #
+@functools.cache  # a default config per key, not one per run of every agent
 def _env_default(key: str):
     """The env's default of the ``gym.make`` argument ``key``."""
     from tether_gym.envs.config import FLAT_NAMES, EnvConfig

@@ -56,9 +56,7 @@ modification times adds no more).
 from __future__ import annotations
 
 import json
-import os
 import re
-import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -66,7 +64,7 @@ from typing import Any
 
 import numpy as np
 
-from ..common.atomic_write import atomic_target, write_text_atomic
+from ..common.atomic_write import atomic_target, new_temporary_file, write_text_atomic
 from ..common.jsonio import loads_json, to_jsonable
 from ..common.yamlio import MAX_YAML_BYTES, load_yaml_file
 from .folder_paths import FolderFileError, file_inside, folder_inside, size_cap
@@ -473,9 +471,7 @@ def check_writable_folder(out: Path, written: Sequence[str]) -> None:
                                   "(remove or rename it)")
     try:
         out.mkdir(parents=True, exist_ok=True)
-        probe = out / f".write_test-{os.getpid()}-{secrets.token_hex(4)}"
-        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))  # a new file
-        probe.unlink()
+        new_temporary_file(out / "write_test").unlink()  # a new file, nothing written to
     except OSError as exc:
         raise FolderFileError(f"cannot write there ({exc.strerror or exc})") from None
 

@@ -48,15 +48,18 @@ def read_npz(path, *, max_bytes: int, required: tuple[str, ...] = (),
         array, a declared size beyond its member or ``max_bytes``, a missing array.
     """
     path = Path(path)
-    try:
+    try:  # one open archive: the arrays read are those whose headers were checked
         with zipfile.ZipFile(path) as archive:
             members = _checked_members(archive, path, max_bytes)
-        missing = [k for k in required if k not in members]
-        if missing:
-            raise NpzFileError(f"{path} holds no {missing[0]!r}; {what} holds "
-                               f"{list(required)}")
-        with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in members}
+            missing = [k for k in required if k not in members]
+            if missing:
+                raise NpzFileError(f"{path} holds no {missing[0]!r}; {what} holds "
+                                   f"{list(required)}")
+            arrays = {}
+            for name in members:
+                with archive.open(f"{name}.npy") as fh:
+                    arrays[name] = np.lib.format.read_array(fh, allow_pickle=False)
+            return arrays
     except NpzFileError:
         raise
     except Exception as exc:  # noqa: BLE001 - a forged archive raises many kinds

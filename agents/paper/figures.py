@@ -7,7 +7,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..common.atomic_write import atomic_target
+from ..common.atomic_write import save_figure
 from .runs import Trajectory
 from .settings import PLOT_EXTRA, TABLE1_LENGTH
 
@@ -60,8 +60,7 @@ def figure_class():
 def _save(fig, out_dir: Path, name: str, written: list) -> None:
     fig.tight_layout()
     path = out_dir / name
-    with atomic_target(path) as tmp:  # a link or FIFO there is replaced, not written to
-        fig.savefig(tmp, dpi=110)
+    save_figure(fig, path, dpi=110)  # a link or FIFO there is replaced, not written to
     written.append(path.name)
 
 

@@ -7,11 +7,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..common.atomic_write import save_figure
 from ..files.run_folder import (
     LEARNING_CURVE_FILE,
     SEED_CURVES_FILE,
     DamagedFileError,
-    atomic_target,
     evaluations_path,
     read_evaluations,
     seed_runs,
@@ -49,8 +49,7 @@ def plot_learning_curve(run_dir: Path) -> Path | None:
     ax_len.set_ylabel("episode length")
     ax_len.set_xlabel("env steps")
     out = Path(run_dir) / LEARNING_CURVE_FILE
-    with atomic_target(out) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+    save_figure(fig, out, dpi=100, format="png")
     return out
 
 
@@ -99,6 +98,5 @@ def plot_seed_learning_curves(folder: Path) -> Path | None:
     ax.set_ylabel("mean evaluation return")
     ax.set_title(f"{Path(folder).name}: deterministic evaluation episodes, every seed")
     out = Path(folder) / SEED_CURVES_FILE
-    with atomic_target(out) as tmp:
-        fig.savefig(tmp, dpi=100, format="png")
+    save_figure(fig, out, dpi=100, format="png")
     return out

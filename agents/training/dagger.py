@@ -80,6 +80,7 @@ from ..files.run_folder import (
     append_command,
     check_fresh_run_folder,
     write_config,
+    write_text_atomic,
     write_train_info,
 )
 from ..files.safe_format import (
@@ -744,7 +745,7 @@ def train_dagger(settings: DaggerSettings, out, command: str = "",
     wall = time.perf_counter() - t0
     _save(out, policy, norm, env_kwargs, training, student_features(settings))
     data.save(out / DATA_FILE)
-    (out / ITERATION_LOG_FILE).write_text(json.dumps(history, indent=1))
+    write_text_atomic(out / ITERATION_LOG_FILE, json.dumps(history, indent=1))
     summary = {"algo": "dagger", "expert": "mpc", "env_id": tether_gym.ENV_ID,
                "seed": settings.seed, "command": command, "status": "finished",
                "tether_gym": tether_gym.__version__, "torch": torch.__version__,

@@ -16,6 +16,8 @@ import shlex
 import sys
 from pathlib import Path
 
+from tether_gym.envs.config import EnvConfig
+
 from ..common.ranges import interval
 from ..files.folder_paths import FolderFileError
 from .dagger import (
@@ -146,9 +148,10 @@ def main(argv=None) -> int:
             print(f"{PROG}: error: {exc}", file=sys.stderr)
             return 2
     initial = None
+    env = EnvConfig.from_kwargs(**training_env_kwargs(settings.orbits)) if args.data else None
     for path in args.data or ():
         try:  # its messages name the file and the key
-            part = _fitting(Dataset.load(path), path, settings.orbits)
+            part = _fitting(Dataset.load(path), path, env)
         except ValueError as exc:
             print(f"{PROG}: error: --data {exc}", file=sys.stderr)
             return 2
@@ -171,11 +174,8 @@ def main(argv=None) -> int:
     return 0
 
 
-def _fitting(data: Dataset, path, orbits) -> Dataset:
-    """``data`` if its observations and labels fit the training env; else ValueError."""
-    from tether_gym.envs.config import EnvConfig
-
-    config = EnvConfig.from_kwargs(**training_env_kwargs(orbits))
+def _fitting(data: Dataset, path, config) -> Dataset:
+    """``data`` if its observations and labels fit the training env's ``config``."""
     got = (data.obs.shape[1], data.labels.shape[1])
     if got != (config.obs_dim, config.n_tethers):
         raise ValueError(f"{path}: observations of {got[0]} entries and labels of {got[1]}; "

@@ -45,6 +45,8 @@ MAX_BODIES = 20
 """Largest N: the default lengths 1/(N-1) must stay inside the default length bounds."""
 MIN_STEP = 1.0e-4
 """Smallest control and physics step [rad] (60,000 steps per orbit)."""
+MAX_CONTROL_STEP = 1.0
+"""Largest control step [rad]: at most MAX_CONTROL_STEP / MIN_STEP RK4 substeps."""
 MAX_INITIAL_NU = 1.0e4
 """Largest |initial_nu| [rad] (about 1,600 orbits)."""
 MAX_LENGTH_RATIO = 0.1
@@ -145,7 +147,7 @@ class Episode:
                 raise ValueError(f"initial_theta={self.initial_theta!r} must lie in "
                                  "(-pi/2, pi/2)")
             object.__setattr__(self, "initial_theta", theta0)
-        check_range("control_step", self.control_step, MIN_STEP, 1.0)
+        check_range("control_step", self.control_step, MIN_STEP, MAX_CONTROL_STEP)
         check_range("physics_step", self.physics_step, MIN_STEP, self.control_step)
         ratio = self.control_step / self.physics_step
         if abs(ratio - round(ratio)) > 1e-9 * ratio:
